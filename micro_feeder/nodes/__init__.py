@@ -1,0 +1,1 @@
+"""Thin rclpy nodes over the physics: actuator, simulator, recorder, replay."""

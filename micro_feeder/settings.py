@@ -1,0 +1,119 @@
+"""Reading model parameters from YAML files and ``--set NAME=VALUE`` overrides.
+
+The result is one flat ``{dotted name: value}`` mapping in the shared namespace (``contact.sigma``,
+``stroke.frequency`` ...). A file may be a ROS 2 parameters file (``/**: ros__parameters: {...}``, as
+``config/feeder.yaml`` is, so the nodes read the same file) or a plain nested or flat mapping.
+"""
+
+from __future__ import annotations
+
+import difflib
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from .physics.contact.params import ContactParams
+from .physics.parameters import ParameterError, ParameterGroup, ParamSpec, all_specs
+from .physics.particle import ParticleParams
+
+# Every group in the shared namespace; later layers append theirs here.
+PARAMETER_GROUPS: list[type[ParameterGroup]] = [ContactParams, ParticleParams]
+
+
+# Sections of a ROS 2 parameters file that hold model parameters, merged in this order.
+ROS_SECTIONS = ('/**', 'simulator', '/simulator')
+
+
+class SettingsError(ValueError):
+    """A parameters file or override that cannot be read; the message says what to fix."""
+
+
+def known_parameters() -> dict[str, tuple[ParamSpec, Any]]:
+    """``{dotted name: (spec, default)}`` for every model parameter."""
+    return all_specs(PARAMETER_GROUPS)
+
+
+def flatten(tree: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
+    """``{'a': {'b': 1}}`` -> ``{'a.b': 1}``; dotted keys are kept as they are."""
+    flat: dict[str, Any] = {}
+    for key, value in tree.items():
+        name = f'{prefix}{key}'
+        if isinstance(value, Mapping):
+            flat.update(flatten(value, name + '.'))
+        else:
+            flat[name] = value
+    return flat
+
+
+def read_parameters_file(path: Path | str) -> dict[str, Any]:
+    """The model parameters in a YAML file, flattened.
+
+    In a ROS 2 parameters file, the ``ros__parameters`` of the ``/**`` section and of the
+    ``simulator`` node are merged (in that order); node-only settings such as ``publish_rate`` that are
+    not model parameters are left to the nodes.
+    """
+    path = Path(path)
+    try:
+        tree = yaml.safe_load(path.read_text())
+    except OSError as err:
+        raise SettingsError(f'cannot read parameters file {path}: {err.strerror}') from err
+    except yaml.YAMLError as err:
+        raise SettingsError(f'parameters file {path} is not valid YAML: {err}') from err
+    if tree is None:
+        return {}
+    if not isinstance(tree, Mapping):
+        raise SettingsError(f'parameters file {path} must hold a mapping of names to values')
+    sections = [v['ros__parameters'] for k, v in tree.items()
+                if isinstance(v, Mapping) and 'ros__parameters' in v and k in ROS_SECTIONS]
+    if not sections and any(isinstance(v, Mapping) and 'ros__parameters' in v for v in tree.values()):
+        return {}
+    flat: dict[str, Any] = {}
+    for section in sections or [tree]:
+        flat.update(flatten(section))
+    known = known_parameters()
+    return {k: v for k, v in flat.items() if k in known} if sections else flat
+
+
+def parse_override(text: str) -> tuple[str, Any]:
+    """``'stroke.frequency=1e3'`` -> ``('stroke.frequency', 1000.0)``; the value is read as YAML."""
+    name, sep, raw = text.partition('=')
+    if not sep or not name.strip():
+        raise SettingsError(f'--set expects NAME=VALUE, got {text!r} (e.g. --set contact.beta=0.05)')
+    try:
+        value = yaml.safe_load(raw)
+    except yaml.YAMLError as err:
+        raise SettingsError(f'--set {text!r}: the value is not valid YAML: {err}') from err
+    if isinstance(value, str) and value.strip().lower() in ('nan', '.nan', 'inf', '-inf'):
+        value = float(value)
+    return name.strip(), value
+
+
+def load_settings(params_files: Iterable[Path | str] = (), overrides: Iterable[str] = ()) -> dict[str, Any]:
+    """Merge parameters files (in order) and ``--set`` overrides into one checked flat mapping.
+
+    Unknown names are refused with the closest known names; values are validated later, when the
+    parameter groups are built (see :func:`build_group`).
+    """
+    flat: dict[str, Any] = {}
+    for path in params_files:
+        flat.update(read_parameters_file(path))
+    for text in overrides:
+        name, value = parse_override(text)
+        flat[name] = value
+    known = known_parameters()
+    for name in flat:
+        if name not in known:
+            close = difflib.get_close_matches(name, known, n=3)
+            hint = f'; did you mean {", ".join(close)}?' if close else '; see docs/parameters.md'
+            raise SettingsError(f'unknown parameter {name!r}{hint}')
+    return flat
+
+
+def build_group(group: type[ParameterGroup], flat: Mapping[str, Any]) -> Any:
+    """Construct one parameter group, turning a validation failure into a :class:`SettingsError`."""
+    try:
+        return group.from_flat(flat)
+    except ParameterError as err:
+        raise SettingsError(str(err)) from err

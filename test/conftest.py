@@ -1,0 +1,13 @@
+"""Test session set-up: ROS traffic on loopback only, a random domain, logs in a temp dir.
+
+Set before any test imports rclpy, so every Context and every child process inherits them.
+"""
+
+import os
+import random
+import tempfile
+
+os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+os.environ['ROS_DOMAIN_ID'] = str(random.SystemRandom().randint(1, 100))
+os.environ['ROS_LOG_DIR'] = tempfile.mkdtemp(prefix='micro-feeder-roslog-')
+os.environ.setdefault('MPLBACKEND', 'Agg')
