@@ -8,6 +8,7 @@ The result is one flat ``{dotted name: value}`` mapping in the shared namespace 
 from __future__ import annotations
 
 import difflib
+import re
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -24,6 +25,21 @@ PARAMETER_GROUPS: list[type[ParameterGroup]] = [ContactParams, ParticleParams]
 
 # Sections of a ROS 2 parameters file that hold model parameters, merged in this order.
 ROS_SECTIONS = ('/**', 'simulator', '/simulator')
+
+
+class _Yaml12FloatLoader(yaml.SafeLoader):
+    """SafeLoader that also reads ``30e-9`` and ``1e9`` as floats (YAML 1.2; PyYAML's YAML 1.1 resolver
+    wants a dot and would hand these over as strings)."""
+
+
+_Yaml12FloatLoader.add_implicit_resolver(
+    'tag:yaml.org,2002:float',
+    re.compile(r'^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$'),
+    list('-+0123456789'))
+
+
+def _load_yaml(text: str) -> Any:
+    return yaml.load(text, Loader=_Yaml12FloatLoader)
 
 
 class SettingsError(ValueError):
@@ -56,7 +72,7 @@ def read_parameters_file(path: Path | str) -> dict[str, Any]:
     """
     path = Path(path)
     try:
-        tree = yaml.safe_load(path.read_text())
+        tree = _load_yaml(path.read_text())
     except OSError as err:
         raise SettingsError(f'cannot read parameters file {path}: {err.strerror}') from err
     except yaml.YAMLError as err:
@@ -82,7 +98,7 @@ def parse_override(text: str) -> tuple[str, Any]:
     if not sep or not name.strip():
         raise SettingsError(f'--set expects NAME=VALUE, got {text!r} (e.g. --set contact.beta=0.05)')
     try:
-        value = yaml.safe_load(raw)
+        value = _load_yaml(raw)
     except yaml.YAMLError as err:
         raise SettingsError(f'--set {text!r}: the value is not valid YAML: {err}') from err
     if isinstance(value, str) and value.strip().lower() in ('nan', '.nan', 'inf', '-inf'):

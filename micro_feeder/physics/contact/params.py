@@ -38,7 +38,8 @@ class ContactParams(ParameterGroup):
     psi: float = param(2.5, 'plasticity index (2E/(pi K H)) sqrt(sigma/R)', '', gt=0)
     hardness: float = param(1e9, 'hardness H of the softer material', 'Pa', gt=0)
     poisson: float = param(0.33, "Poisson's ratio", '', ge=0, lt=0.5)
-    delta_gamma: float = param(1.0, 'work of adhesion (surface-energy difference)', 'J/m^2', ge=0)
+    delta_gamma: float = param(1.0, 'work of adhesion (surface-energy difference); > 0 so a pull-off force exists',
+                               'J/m^2', gt=0)
     beta: float = param(0.099962, 'roughness parameter eta R sigma', '', gt=0)
     epsilon: float = param(0.4e-9, 'Lennard-Jones equilibrium (intermolecular) distance', 'm', gt=0)
     adhesion_contact_scale: float = param(0.36037, 'multiplier on the contacting-asperity adhesion', '',
