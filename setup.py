@@ -39,6 +39,10 @@ setup(
     entry_points={
         'console_scripts': [
             'micro-feeder = micro_feeder.cli:main',
+            'actuator = micro_feeder.nodes.actuator:main',
+            'simulator = micro_feeder.nodes.simulator:main',
+            'recorder = micro_feeder.nodes.recorder:main',
+            'replay = micro_feeder.nodes.replay:main',
         ],
     },
 )
