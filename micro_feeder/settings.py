@@ -16,11 +16,12 @@ from typing import Any
 import yaml
 
 from .physics.contact.params import ContactParams
+from .physics.dynamics.params import dynamics_parameter_groups
 from .physics.parameters import ParameterError, ParameterGroup, ParamSpec, all_specs
 from .physics.particle import ParticleParams
 
 # Every group in the shared namespace; later layers append theirs here.
-PARAMETER_GROUPS: list[type[ParameterGroup]] = [ContactParams, ParticleParams]
+PARAMETER_GROUPS: list[type[ParameterGroup]] = [ContactParams, ParticleParams, *dynamics_parameter_groups()]
 
 
 # Sections of a ROS 2 parameters file that hold model parameters, merged in this order.

@@ -1,0 +1,548 @@
+"""The compiled inner loop: particle on the actuated surface, RK4 with event location.
+
+Plain functions over numpy arrays so that numba compiles them (``NUMBA_DISABLE_JIT=1`` runs the very
+same code as Python). The public, documented API is :mod:`micro_feeder.physics.dynamics.model`; this
+module is its engine. Equations: DYNAMICS.md §4 (and docs/dynamics.md).
+
+Data passed around (all SI):
+
+* ``model``: tuple ``(prm, centers, widths, load_n, q_max_n, separation_m, gap_m, attraction_n, n_act)``
+  with ``prm`` the scalar parameter vector indexed by the ``P_*`` constants below;
+* ``src``: a :class:`~micro_feeder.physics.waveforms.StrokeTable` as a tuple; channels 0..n_act-1 are
+  the actuators, channel n_act (present when ``prm[P_HAS_BASE]``) the horizontal base acceleration of
+  the test-only flat-surface check (its s̈ is the base acceleration);
+* ``y``: state vector. In contact ``[x, ẋ, 0, 0]``, in flight ``[x, v_x, z, v_z]``; then, with the piezo
+  model, ``[s_k, ṡ_k]`` per actuator;
+* ``iv`` (int64) and ``fs`` (float64): discrete state and bookkeeping, indexed by ``IV_*`` / ``FS_*``.
+
+Every mode has two *margins*, positive while the mode lasts; an event is a margin reaching 0:
+stuck: Q_max − |T_req| and N_det + F_po; sliding: dir·ẋ and N_det + F_po; flying: the gap δ.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .._jit import jit
+from ..piezo import piezo_acceleration
+from ..surface import surface_at
+from ..waveforms import channel_value, locate_segment, segment_end
+
+STUCK, SLIDING, FLYING = 0, 1, 2
+
+# prm: scalar parameters
+(P_MASS, P_GRAVITY, P_PULL_OFF, P_DT, P_EVENT_TOL, P_CONVECTIVE, P_INCLUDE_WEIGHT, P_LANDING_RELATIVE,
+ P_THRESHOLD, P_PIEZO, P_PIEZO_OMEGA, P_PIEZO_ZETA, P_PIEZO_MIN, P_PIEZO_MAX, P_HAS_BASE, P_RECORD) = range(16)
+N_PRM = 16
+
+# iv: discrete state. IV_ENTRY_COUNTER: the counter incremented when the current mode was entered (-1
+# none), IV_PREV_MODE: the mode before it; both serve "a mode that ends within the event tolerance of
+# its start is treated as not entered".
+(IV_MODE, IV_DIR, IV_FRESH, IV_STICK_TO_SLIP, IV_SLIP_TO_STICK, IV_TAKE_OFF, IV_LANDING,
+ IV_ENTRY_COUNTER, IV_PREV_MODE) = range(9)
+N_IV = 9
+COUNTERS = (IV_STICK_TO_SLIP, IV_SLIP_TO_STICK, IV_TAKE_OFF, IV_LANDING)
+
+# fs: continuous bookkeeping
+FS_T, FS_T_ENTRY, FS_MAX_SPEED = range(3)
+N_FS = 3
+
+# aux: quantities of the last evaluation
+(AUX_N, AUX_T_REQ, AUX_QMAX, AUX_L, AUX_H, AUX_HX, AUX_HT, AUX_GAP, AUX_XS) = range(9)
+N_AUX = 9
+
+# Columns of a recorded row (then one stroke column per actuator).
+(C_T, C_MODE, C_X, C_Z, C_XD, C_ZD, C_THETA, C_N, C_FRICTION, C_QMAX, C_SEPARATION, C_GAP, C_H,
+ C_HT) = range(14)
+N_FIXED_COLUMNS = 14
+COLUMN_NAMES = ('t', 'mode', 'x', 'z', 'xdot', 'zdot', 'theta', 'normal_load', 'friction', 'q_max',
+                'separation', 'gap', 'surface_height', 'surface_velocity')
+
+# Kernel return codes.
+DONE, EVENTS_FULL, RECORDS_FULL, NON_FINITE, EVENT_NOT_LOCATED, CHATTER = range(6)
+
+# Event kinds (recorded with each mode change); REVERSAL: a slide changing direction (not counted).
+STICK_TO_SLIP, SLIP_TO_STICK, TAKE_OFF, LANDING, REVERSAL = range(5)
+
+
+@jit
+def interp(xs: np.ndarray, ys: np.ndarray, x: float) -> float:
+    """Linear interpolation in a table with increasing ``xs``, extrapolated linearly at both ends."""
+    n = xs.size
+    i = min(max(int(np.searchsorted(xs, x)) - 1, 0), n - 2)
+    return ys[i] + (x - xs[i]) * (ys[i + 1] - ys[i]) / (xs[i + 1] - xs[i])
+
+
+@jit
+def attraction(gap_m: np.ndarray, attraction_n: np.ndarray, gap: float) -> float:
+    """F_att(δ) ≥ 0 (N): table, then the (ε/d)² tail beyond its last gap; δ < 0 reads as 0."""
+    last = gap_m.size - 1
+    if gap >= gap_m[last]:
+        return attraction_n[last] * (gap_m[last] / gap) ** 2
+    return interp(gap_m, attraction_n, max(gap, 0.0))
+
+
+@jit
+def strokes_at(t: float, y: np.ndarray, model: tuple, src: tuple, cur: np.ndarray,
+               st: np.ndarray) -> float:
+    """Fill ``st`` (3, channels) with s, ṡ, s̈ at ``t`` on the segments ``cur``; return the base
+    acceleration (m/s², 0 without the test-only base channel). With the piezo model the actuators'
+    s, ṡ come from the state and s̈ from the stack dynamics driven by the commanded stroke."""
+    prm = model[0]
+    n_act = model[8]
+    for k in range(st.shape[1]):
+        s, sd, sdd = channel_value(src, k, cur[k, 0], cur[k, 1], t)
+        st[0, k] = s
+        st[1, k] = sd
+        st[2, k] = sdd
+    if prm[P_PIEZO] != 0.0:
+        for k in range(n_act):
+            s = y[4 + 2 * k]
+            sd = y[5 + 2 * k]
+            st[2, k] = piezo_acceleration(st[0, k], s, sd, prm[P_PIEZO_OMEGA], prm[P_PIEZO_ZETA],
+                                          prm[P_PIEZO_MIN], prm[P_PIEZO_MAX])
+            st[0, k] = s
+            st[1, k] = sd
+    return st[2, n_act] if prm[P_HAS_BASE] != 0.0 else 0.0
+
+
+@jit
+def contact_load(x: float, xd: float, st: np.ndarray, base_acc: float, model: tuple,
+                 aux: np.ndarray) -> None:
+    """Normal load N, required friction T_req and Q_max(N) for a part on the surface at (x, ẋ).
+
+    N = m (h_tt + 2 h_xt ẋ + h_xx ẋ² + g − h_x a_b) / L, T_req = N h_x + m L a_b (a_b: base
+    acceleration, 0 except in the flat-surface check), and ẍ = (T − T_req) / (m L).
+    """
+    prm, centers, widths, load_n, q_max_n = model[0], model[1], model[2], model[3], model[4]
+    m = prm[P_MASS]
+    h, hx, hxx, ht, htt, hxt = surface_at(x, st[0], st[1], st[2], centers, widths)
+    length = math.sqrt(1.0 + hx * hx)
+    normal_acc = htt + prm[P_GRAVITY] - hx * base_acc
+    if prm[P_CONVECTIVE] != 0.0:
+        normal_acc += 2.0 * hxt * xd + hxx * xd * xd
+    n = m * normal_acc / length
+    aux[AUX_N] = n
+    aux[AUX_T_REQ] = n * hx + m * length * base_acc
+    aux[AUX_QMAX] = interp(load_n, q_max_n, n)
+    aux[AUX_L] = length
+    aux[AUX_H] = h
+    aux[AUX_HX] = hx
+    aux[AUX_HT] = ht
+
+
+@jit
+def closest_point(x: float, z: float, st: np.ndarray, model: tuple, aux: np.ndarray) -> None:
+    """Closest surface point to (x, z) by Newton on its abscissa x_s; sets AUX_XS, AUX_H, AUX_HX (at
+    x_s), AUX_L and AUX_GAP = signed distance along the normal there (> 0 above the surface)."""
+    centers, widths = model[1], model[2]
+    xs = x
+    for _ in range(20):
+        h, hx, hxx, _ht, _htt, _hxt = surface_at(xs, st[0], st[1], st[2], centers, widths)
+        step = ((xs - x) + (h - z) * hx) / (1.0 + hx * hx + (h - z) * hxx)
+        xs -= step
+        if abs(step) <= 1e-15 + 1e-13 * abs(xs):
+            break
+    h, hx, _hxx, _ht, _htt, _hxt = surface_at(xs, st[0], st[1], st[2], centers, widths)
+    length = math.sqrt(1.0 + hx * hx)
+    aux[AUX_XS] = xs
+    aux[AUX_H] = h
+    aux[AUX_HX] = hx
+    aux[AUX_L] = length
+    aux[AUX_GAP] = ((z - h) - hx * (x - xs)) / length
+
+
+@jit
+def evaluate(mode: int, direction: int, t: float, y: np.ndarray, model: tuple, src: tuple,
+             cur: np.ndarray, st: np.ndarray, aux: np.ndarray, dy: np.ndarray) -> tuple[float, float]:
+    """Right-hand side ``dy`` of mode ``mode`` at (t, y), and the mode's two margins."""
+    prm = model[0]
+    m = prm[P_MASS]
+    base_acc = strokes_at(t, y, model, src, cur, st)
+    for i in range(dy.size):
+        dy[i] = 0.0
+    if prm[P_PIEZO] != 0.0:
+        for k in range(model[8]):
+            dy[4 + 2 * k] = st[1, k]
+            dy[5 + 2 * k] = st[2, k]
+    if mode == FLYING:
+        closest_point(y[0], y[2], st, model, aux)
+        f_att = attraction(model[6], model[7], aux[AUX_GAP])
+        aux[AUX_N] = -f_att
+        dy[0] = y[1]
+        dy[1] = -base_acc + f_att * aux[AUX_HX] / (aux[AUX_L] * m)
+        dy[2] = y[3]
+        dy[3] = -prm[P_GRAVITY] - f_att / (aux[AUX_L] * m)
+        return aux[AUX_GAP], math.inf
+    contact_load(y[0], y[1], st, base_acc, model, aux)
+    n_detach = aux[AUX_N]
+    if prm[P_INCLUDE_WEIGHT] == 0.0:
+        n_detach -= m * prm[P_GRAVITY] / aux[AUX_L]
+    adhesion_margin = n_detach + prm[P_PULL_OFF]
+    if mode == STUCK:
+        stick_margin = math.inf if prm[P_THRESHOLD] != 0.0 else aux[AUX_QMAX] - abs(aux[AUX_T_REQ])
+        return stick_margin, adhesion_margin
+    friction = -direction * aux[AUX_QMAX]
+    dy[0] = y[1]
+    dy[1] = (friction - aux[AUX_T_REQ]) / (m * aux[AUX_L])
+    slide_margin = math.inf if prm[P_THRESHOLD] != 0.0 else direction * y[1]
+    return slide_margin, adhesion_margin
+
+
+@jit
+def locate_all(src: tuple, t: float, cur: np.ndarray) -> float:
+    """Point ``cur`` at the segments active at ``t`` (right side); return the next breakpoint."""
+    t_next = math.inf
+    for k in range(cur.shape[0]):
+        j, i = locate_segment(src, k, t)
+        cur[k, 0] = j
+        cur[k, 1] = i
+        t_next = min(t_next, segment_end(src, k, j, i))
+    return t_next
+
+
+@jit
+def rk4_step(mode: int, direction: int, t: float, y: np.ndarray, f0: np.ndarray, h: float, model: tuple,
+             src: tuple, cur: np.ndarray, st: np.ndarray, aux: np.ndarray, work: np.ndarray,
+             out: np.ndarray) -> None:
+    """One classical RK4 step of size ``h`` from (t, y) with slope ``f0`` at its start, into ``out``.
+
+    Stuck without the piezo model nothing moves: ``out`` = ``y`` at no cost (no RK work while stuck).
+    """
+    if mode == STUCK and model[0][P_PIEZO] == 0.0:
+        copy_into(out, y)
+        return
+    k2, k3, k4, ytmp = work[0], work[1], work[2], work[3]
+    n = y.size
+    for i in range(n):
+        ytmp[i] = y[i] + 0.5 * h * f0[i]
+    evaluate(mode, direction, t + 0.5 * h, ytmp, model, src, cur, st, aux, k2)
+    for i in range(n):
+        ytmp[i] = y[i] + 0.5 * h * k2[i]
+    evaluate(mode, direction, t + 0.5 * h, ytmp, model, src, cur, st, aux, k3)
+    for i in range(n):
+        ytmp[i] = y[i] + h * k3[i]
+    evaluate(mode, direction, t + h, ytmp, model, src, cur, st, aux, k4)
+    for i in range(n):
+        out[i] = y[i] + (h / 6.0) * (f0[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
+
+
+@jit
+def hermite(theta: float, h: float, y0: np.ndarray, f0: np.ndarray, y1: np.ndarray, f1: np.ndarray,
+            out: np.ndarray) -> None:
+    """Cubic Hermite interpolant of a step at fraction ``theta`` (dense output, 4th-order accurate)."""
+    t2 = theta * theta
+    t3 = t2 * theta
+    a0, b0, a1, b1 = 2 * t3 - 3 * t2 + 1, (t3 - 2 * t2 + theta) * h, -2 * t3 + 3 * t2, (t3 - t2) * h
+    for i in range(y0.size):
+        out[i] = a0 * y0[i] + b0 * f0[i] + a1 * y1[i] + b1 * f1[i]
+
+
+@jit
+def locate_root(which: int, mode: int, direction: int, t: float, h: float, y0: np.ndarray,
+                f0: np.ndarray, y1: np.ndarray, f1: np.ndarray, g_start: float, g_end: float,
+                model: tuple, src: tuple, cur: np.ndarray, st: np.ndarray, aux: np.ndarray,
+                work: np.ndarray) -> float:
+    """Step fraction at which margin ``which`` (0 or 1) first reaches 0 on the step's interpolant.
+
+    Illinois regula falsi, with bisection while the left end is not strictly positive (a margin that
+    is 0 by construction at the start of a fresh mode). Returns the right end of the final bracket
+    (where the margin is ≤ 0), narrower than the event tolerance; -1 if it could not be located.
+    """
+    tol = model[0][P_EVENT_TOL] / h
+    a, b = 0.0, 1.0
+    ga, gb = g_start, g_end
+    side = 0
+    yi, dy = work[4], work[5]
+    for it in range(200):
+        if b - a <= tol:
+            return b
+        if ga > 0.0 and it < 60:
+            theta = b - gb * (b - a) / (gb - ga)
+            theta = min(max(theta, a + 0.25 * tol), b - 0.25 * tol)
+        else:
+            theta = 0.5 * (a + b)
+        hermite(theta, h, y0, f0, y1, f1, yi)
+        margins = evaluate(mode, direction, t + theta * h, yi, model, src, cur, st, aux, dy)
+        g = margins[which]
+        if g > 0.0:
+            a, ga = theta, g
+            if side == 1:
+                gb *= 0.5
+            side = 1
+        else:
+            b, gb = theta, g
+            if side == -1:
+                ga *= 0.5
+            side = -1
+    return -1.0
+
+
+@jit
+def enter(iv: np.ndarray, fs: np.ndarray, t: float, new_mode: int, counter: int, grazing: bool) -> None:
+    """Switch to ``new_mode`` at ``t`` and count the transition in ``iv[counter]`` (-1: not counted).
+
+    ``grazing``: the mode being left ends (at a located event) within the event tolerance of its start,
+    so it counts as never entered: this transition is not counted, and when the part returns to the
+    mode it came from, the entry into the grazed mode is uncounted too (DYNAMICS.md §4.4).
+    """
+    if grazing:
+        if new_mode == iv[IV_PREV_MODE] and iv[IV_ENTRY_COUNTER] >= 0:
+            iv[iv[IV_ENTRY_COUNTER]] -= 1
+        counter = -1
+    elif counter >= 0:
+        iv[counter] += 1
+    iv[IV_PREV_MODE] = iv[IV_MODE]
+    iv[IV_MODE] = new_mode
+    iv[IV_ENTRY_COUNTER] = counter
+    fs[FS_T_ENTRY] = t
+
+
+@jit
+def copy_into(target: np.ndarray, values: np.ndarray) -> None:
+    """target[:] = values, element by element (a slice assignment may allocate a temporary)."""
+    for i in range(values.size):
+        target[i] = values[i]
+
+
+@jit
+def finite(values: np.ndarray) -> bool:
+    """True when every entry is finite (an explicit loop: numba compiles no generator expressions)."""
+    for v in values:  # noqa: SIM110
+        if not math.isfinite(v):
+            return False
+    return True
+
+
+@jit
+def sign(value: float) -> int:
+    """+1, -1 or 0."""
+    return 1 if value > 0.0 else (-1 if value < 0.0 else 0)
+
+
+@jit
+def transition(which: int, t: float, y: np.ndarray, model: tuple, src: tuple, cur: np.ndarray,
+               st: np.ndarray, aux: np.ndarray, iv: np.ndarray, fs: np.ndarray, grazing: bool) -> int:
+    """Apply the event of margin ``which`` in the current mode at (t, y) (DYNAMICS.md §4.2); returns
+    the event kind. ``y`` is rewritten for the new mode."""
+    prm = model[0]
+    mode = iv[IV_MODE]
+    base_acc = strokes_at(t, y, model, src, cur, st)
+    if mode == FLYING:                                     # landing: keep the tangential velocity
+        _h, hx, _hxx, ht, _htt, _hxt = surface_at(y[0], st[0], st[1], st[2], model[1], model[2])
+        surface_vz = ht if prm[P_LANDING_RELATIVE] != 0.0 else 0.0
+        xd = (y[1] + hx * (y[3] - surface_vz)) / (1.0 + hx * hx)
+        y[1] = xd
+        y[2] = 0.0
+        y[3] = 0.0
+        iv[IV_DIR] = sign(xd)
+        iv[IV_FRESH] = 0
+        enter(iv, fs, t, SLIDING if xd != 0.0 else STUCK, IV_LANDING, grazing)
+        return LANDING
+    if which == 1:                                         # take-off with the contact velocity
+        h, hx, _hxx, ht, _htt, _hxt = surface_at(y[0], st[0], st[1], st[2], model[1], model[2])
+        y[2] = h
+        y[3] = ht + hx * y[1]
+        iv[IV_FRESH] = 1
+        enter(iv, fs, t, FLYING, IV_TAKE_OFF, grazing)
+        return TAKE_OFF
+    y[1] = 0.0
+    contact_load(y[0], 0.0, st, base_acc, model, aux)
+    if mode == STUCK:                                      # friction opposes the impending motion
+        iv[IV_DIR] = -sign(aux[AUX_T_REQ])
+        iv[IV_FRESH] = 1
+        enter(iv, fs, t, SLIDING, IV_STICK_TO_SLIP, grazing)
+        return STICK_TO_SLIP
+    if abs(aux[AUX_T_REQ]) <= aux[AUX_QMAX]:               # sliding came to rest and can stay
+        enter(iv, fs, t, STUCK, IV_SLIP_TO_STICK, grazing)
+        return SLIP_TO_STICK
+    iv[IV_DIR] = -sign(aux[AUX_T_REQ])                     # slides back the other way (not counted)
+    iv[IV_FRESH] = 1
+    return REVERSAL
+
+
+@jit
+def threshold_decision(t: float, y: np.ndarray, model: tuple, src: tuple, cur: np.ndarray,
+                       st: np.ndarray, aux: np.ndarray, iv: np.ndarray, fs: np.ndarray) -> int:
+    """The seed's threshold-velocity friction logic at the start of a step (contact modes only).
+
+    V_th = Q_max dt / m. Slip if |v_rel| ≥ V_th (friction opposes v_rel), or if |T_req| > Q_max
+    (friction opposes the impending motion); stick (ẋ = 0) otherwise. Returns the event kind of a mode
+    change, or -1.
+    """
+    prm = model[0]
+    base_acc = strokes_at(t, y, model, src, cur, st)
+    contact_load(y[0], y[1], st, base_acc, model, aux)
+    v_rel = y[1] * aux[AUX_L]
+    v_threshold = aux[AUX_QMAX] * prm[P_DT] / prm[P_MASS]
+    if v_rel != 0.0 and abs(v_rel) >= v_threshold:
+        new_mode, direction = SLIDING, sign(v_rel)
+    elif abs(aux[AUX_T_REQ]) > aux[AUX_QMAX]:
+        new_mode, direction = SLIDING, -sign(aux[AUX_T_REQ])
+    else:
+        new_mode, direction = STUCK, 0
+        y[1] = 0.0
+    iv[IV_DIR] = direction
+    if new_mode == iv[IV_MODE]:
+        return -1
+    if new_mode == SLIDING:
+        enter(iv, fs, t, SLIDING, IV_STICK_TO_SLIP, False)
+        return STICK_TO_SLIP
+    enter(iv, fs, t, STUCK, IV_SLIP_TO_STICK, False)
+    return SLIP_TO_STICK
+
+
+@jit
+def observe(t: float, y: np.ndarray, iv: np.ndarray, model: tuple, src: tuple, cur: np.ndarray,
+            st: np.ndarray, aux: np.ndarray, dy: np.ndarray, row: np.ndarray) -> None:
+    """Fill ``row`` with the outputs of DYNAMICS.md §6 at (t, y) (columns ``COLUMN_NAMES``, then the
+    actuator strokes). Normal load in flight: −F_att (the attraction, continuous with N at take-off)."""
+    mode = iv[IV_MODE]
+    evaluate(mode, iv[IV_DIR], t, y, model, src, cur, st, aux, dy)
+    row[C_T] = t
+    row[C_MODE] = mode
+    row[C_X] = y[0]
+    row[C_XD] = y[1]
+    row[C_THETA] = math.atan(aux[AUX_HX])
+    row[C_N] = aux[AUX_N]
+    for k in range(model[8]):
+        row[N_FIXED_COLUMNS + k] = st[0, k]
+    if mode == FLYING:
+        h, _hx, _hxx, ht, _htt, _hxt = surface_at(y[0], st[0], st[1], st[2], model[1], model[2])
+        row[C_Z] = y[2]
+        row[C_ZD] = y[3]
+        row[C_FRICTION] = 0.0
+        row[C_QMAX] = math.nan
+        row[C_SEPARATION] = math.nan
+        row[C_GAP] = aux[AUX_GAP]
+        row[C_H] = h
+        row[C_HT] = ht
+        return
+    row[C_Z] = aux[AUX_H]
+    row[C_ZD] = aux[AUX_HT] + aux[AUX_HX] * y[1]
+    row[C_FRICTION] = aux[AUX_T_REQ] if mode == STUCK else -iv[IV_DIR] * aux[AUX_QMAX]
+    row[C_QMAX] = aux[AUX_QMAX]
+    row[C_SEPARATION] = interp(model[3], model[5], aux[AUX_N])
+    row[C_GAP] = math.nan
+    row[C_H] = aux[AUX_H]
+    row[C_HT] = aux[AUX_HT]
+
+
+@jit
+def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, model: tuple, src: tuple,
+            ev_i: np.ndarray, ev_f: np.ndarray, rec: np.ndarray, n_rec: int, scratch: np.ndarray,
+            st: np.ndarray, aux: np.ndarray, cur: np.ndarray) -> tuple[int, int, int]:
+    """Integrate the state (y, iv, fs) from fs[FS_T] to ``t_target`` on the stroke source ``src``.
+
+    Mode changes go to ``ev_i`` (kind, from, to) and ``ev_f`` (t, x); with ``prm[P_RECORD]`` one row
+    per accepted step and per event goes to ``rec`` from row ``n_rec`` on. Returns (status, number of
+    events, rows used). A status other than DONE stops at a consistent state: EVENTS_FULL /
+    RECORDS_FULL ask the caller to drain the buffers and call again; NON_FINITE, EVENT_NOT_LOCATED
+    and CHATTER are errors (the state is left at the last good step). Work arrays (the kernel never
+    allocates): ``scratch`` (9, y.size), ``st`` (3, channels), ``aux`` (N_AUX,), ``cur`` (channels, 2)
+    int64.
+    """
+    prm = model[0]
+    work = scratch[:6]
+    f0 = scratch[6]
+    f1 = scratch[7]
+    y1 = scratch[8]
+    dt = prm[P_DT]
+    tol = prm[P_EVENT_TOL]
+    threshold = prm[P_THRESHOLD] != 0.0
+    record = prm[P_RECORD] != 0.0
+    status = DONE
+    n_ev = 0
+    t = fs[FS_T]
+    need_eval = True
+    t_next = t
+    g0 = g1 = 0.0
+    same_instant = 0
+    t_last_event = math.nan
+    while t < t_target:
+        if n_ev + 2 > ev_i.shape[0]:
+            status = EVENTS_FULL
+            break
+        if record and n_rec + 2 > rec.shape[0]:
+            status = RECORDS_FULL
+            break
+        mode = iv[IV_MODE]
+        which = -1
+        grazing = False
+        if need_eval:
+            t_next = locate_all(src, t, cur)
+            if threshold and mode != FLYING:
+                kind = threshold_decision(t, y, model, src, cur, st, aux, iv, fs)
+                if kind >= 0:
+                    ev_i[n_ev, 0], ev_i[n_ev, 1], ev_i[n_ev, 2] = kind, mode, iv[IV_MODE]
+                    ev_f[n_ev, 0], ev_f[n_ev, 1] = t, y[0]
+                    n_ev += 1
+                    mode = iv[IV_MODE]
+            g0, g1 = evaluate(mode, iv[IV_DIR], t, y, model, src, cur, st, aux, f0)
+            need_eval = False
+            if g1 <= 0.0:                       # a condition that already holds switches at once
+                which = 1
+            elif iv[IV_FRESH] == 0 and (g0 < 0.0 if mode == STUCK else g0 <= 0.0):
+                which = 0
+        if which < 0:
+            h = min(dt, t_next - t, t_target - t)
+            direction = iv[IV_DIR]
+            rk4_step(mode, direction, t, y, f0, h, model, src, cur, st, aux, work, y1)
+            e0, e1 = evaluate(mode, direction, t + h, y1, model, src, cur, st, aux, f1)
+            if not finite(y1) or math.isnan(e0) or math.isnan(e1):
+                status = NON_FINITE
+                break
+            fresh = iv[IV_FRESH] != 0
+            # stuck stays stuck while |T_req| <= Q_max; a fresh mode's margin starts at 0 by construction
+            hit0 = (e0 < 0.0 and g0 >= 0.0) if mode == STUCK else (e0 <= 0.0 and (g0 > 0.0 or fresh))
+            hit1 = e1 <= 0.0 and g1 > 0.0
+            if not (hit0 or hit1):              # accept the step
+                t = t_next if h == t_next - t else (t_target if h == t_target - t else t + h)
+                copy_into(y, y1)
+                copy_into(f0, f1)
+                g0, g1 = e0, e1
+                iv[IV_FRESH] = 0
+                fs[FS_MAX_SPEED] = max(fs[FS_MAX_SPEED], abs(y[1]))
+                if record:
+                    observe(t, y, iv, model, src, cur, st, aux, work[5], rec[n_rec])
+                    n_rec += 1
+                need_eval = t >= t_next or (threshold and mode != FLYING)
+                continue
+            theta = 2.0
+            if hit0:
+                theta = locate_root(0, mode, direction, t, h, y, f0, y1, f1, g0, e0, model, src, cur,
+                                    st, aux, work)
+                which = 0
+            if hit1:
+                theta1 = locate_root(1, mode, direction, t, h, y, f0, y1, f1, g1, e1, model, src, cur,
+                                     st, aux, work)
+                if theta1 < 0.0 or (theta >= 0.0 and theta1 < theta):
+                    theta, which = theta1, 1
+            if theta < 0.0:
+                status = EVENT_NOT_LOCATED
+                break
+            rk4_step(mode, direction, t, y, f0, theta * h, model, src, cur, st, aux, work, y1)
+            t += theta * h
+            copy_into(y, y1)
+            fs[FS_MAX_SPEED] = max(fs[FS_MAX_SPEED], abs(y[1]))
+            grazing = t - fs[FS_T_ENTRY] < tol
+        if t == t_last_event:
+            same_instant += 1
+            if same_instant > 8:
+                status = CHATTER
+                break
+        else:
+            same_instant = 0
+            t_last_event = t
+        kind = transition(which, t, y, model, src, cur, st, aux, iv, fs, grazing)
+        ev_i[n_ev, 0], ev_i[n_ev, 1], ev_i[n_ev, 2] = kind, mode, iv[IV_MODE]
+        ev_f[n_ev, 0], ev_f[n_ev, 1] = t, y[0]
+        n_ev += 1
+        if record:
+            observe(t, y, iv, model, src, cur, st, aux, work[5], rec[n_rec])
+            n_rec += 1
+        need_eval = True
+    fs[FS_T] = t
+    return status, n_ev, n_rec

@@ -1,0 +1,368 @@
+"""The particle-dynamics API: an immutable model, a mutable state, a stepper and a batch run.
+
+Typical use (the simulator node calls ``advance`` every tick)::
+
+    model = FeederModel.from_settings(flat)              # immutable; builds the contact tables once
+    state = model.initial_state()                        # mutable (t = 0, stuck at particle.x0)
+    source = StrokeSchedule(model.waveform())            # or a hold, then commanded trajectories
+    events = model.advance(state, t_target, source)      # -> [Event(...)], state now at t_target
+    obs = model.observe(state, source)                   # pose, twist, wrench, mode at state.t
+    source.command_trajectory(t_cmd, knot_times, positions, velocities, accelerations)
+
+    result = model.run()                                 # a whole scenario as a time series
+
+Like MuJoCo's model/data split, a :class:`FeederModel` never changes after construction (parameters,
+contact tables, packed kernel inputs); a :class:`FeederState` holds everything that evolves, so several
+states can share one model and a state can be copied to branch a run. SI units throughout; frames of
+DYNAMICS.md §1 (``feeder``: x along the feeder, z up; ``contact``: tilted by θ = atan(h_x) about y).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..contact import ContactModel, ContactParams
+from ..particle import ParticleParams
+from ..piezo import PiezoParams
+from ..surface import SurfaceParams
+from ..waveforms import StrokeParams, StrokeSchedule, StrokeTable, stack_tables, waveform_table
+from . import kernel as k
+from .params import DetachParams, IntegrationParams, LandingParams
+
+MODES = ('stuck', 'sliding', 'flying')
+EVENT_KINDS = ('stick_to_slip', 'slip_to_stick', 'take_off', 'landing', 'reversal')
+COUNTER_NAMES = ('stick_to_slip', 'slip_to_stick', 'take_off', 'landing')
+
+
+class SimulationError(RuntimeError):
+    """The integration cannot continue (non-finite state, an event that cannot be located, chatter).
+
+    The message names the time, the mode and the state; ``state`` is left at the last good point.
+    """
+
+
+@dataclass(frozen=True)
+class Event:
+    """One mode change (or slide reversal), at sim time ``t`` (s) and position ``x`` (m)."""
+
+    t: float
+    kind: str
+    from_mode: str
+    to_mode: str
+    x: float
+
+
+@dataclass(frozen=True)
+class Observation:
+    """What the node publishes at one instant (DYNAMICS.md §6), SI units, frame ``feeder``.
+
+    ``theta`` is the contact-frame tilt atan(h_x) (rad) about the feeder's y axis: a pose orientation
+    rotates by −θ about y, so that +x of the contact frame points up the slope when h_x > 0.
+    ``normal_load`` is N (> 0 presses the part on the surface; in flight −F_att, the attraction);
+    ``friction`` is T along the contact frame's x; ``separation`` is d(N) (NaN in flight); ``gap`` the
+    distance to the surface in flight (NaN in contact).
+    """
+
+    t: float
+    mode: str
+    x: float
+    z: float
+    xdot: float
+    zdot: float
+    theta: float
+    normal_load: float
+    friction: float
+    q_max: float
+    separation: float
+    gap: float
+    surface_height: float
+    surface_velocity: float
+    strokes: np.ndarray
+
+
+class FeederState:
+    """Everything that evolves: time, mode, kinematic state, piezo state, transition counters.
+
+    Create it with :meth:`FeederModel.initial_state` or :meth:`FeederModel.flying_state`. Fields are
+    numpy arrays shared with the kernel; read them through the properties.
+    """
+
+    def __init__(self, n_actuators: int, x0: float):
+        self.y = np.zeros(4 + 2 * n_actuators)
+        self.y[0] = x0
+        self.iv = np.zeros(k.N_IV, dtype=np.int64)
+        self.iv[k.IV_ENTRY_COUNTER] = -1
+        self.fs = np.zeros(k.N_FS)
+        self.fs[k.FS_T_ENTRY] = -math.inf
+        self.x0 = x0
+
+    def copy(self) -> FeederState:
+        """An independent copy (to branch a run)."""
+        other = FeederState.__new__(FeederState)
+        other.y, other.iv, other.fs, other.x0 = self.y.copy(), self.iv.copy(), self.fs.copy(), self.x0
+        return other
+
+    @property
+    def t(self) -> float:
+        """Sim time (s)."""
+        return float(self.fs[k.FS_T])
+
+    @property
+    def mode(self) -> str:
+        """``stuck``, ``sliding`` or ``flying``."""
+        return MODES[int(self.iv[k.IV_MODE])]
+
+    @property
+    def x(self) -> float:
+        """Position along the feeder (m)."""
+        return float(self.y[0])
+
+    @property
+    def xdot(self) -> float:
+        """Velocity along x (m/s): ẋ in contact, v_x in flight."""
+        return float(self.y[1])
+
+    @property
+    def distance(self) -> float:
+        """Net displacement x − x0 (m)."""
+        return float(self.y[0] - self.x0)
+
+    @property
+    def max_speed(self) -> float:
+        """Largest |ẋ| (|v_x| in flight) seen so far (m/s)."""
+        return float(self.fs[k.FS_MAX_SPEED])
+
+    @property
+    def transitions(self) -> dict[str, int]:
+        """Counters ``stick_to_slip``, ``slip_to_stick``, ``take_off``, ``landing`` (DYNAMICS.md §4.4)."""
+        return {name: int(self.iv[idx]) for name, idx in zip(COUNTER_NAMES, k.COUNTERS, strict=True)}
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """A simulated time series: one row per accepted step and per event (DYNAMICS.md §6)."""
+
+    columns: tuple[str, ...]
+    data: np.ndarray
+    events: list[Event]
+    state: FeederState
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        """One column by name (``t``, ``x``, ``friction``, ``stroke_0`` ...)."""
+        return self.data[:, self.columns.index(name)]
+
+    @property
+    def modes(self) -> np.ndarray:
+        """Mode per row as strings."""
+        return np.asarray(MODES)[self['mode'].astype(int)]
+
+    def summary(self) -> dict[str, Any]:
+        """Net distance (m), final mode, transition counts, max speed (m/s), sim time (s)."""
+        return {'distance_m': self.state.distance, 'final_mode': self.state.mode,
+                'transitions': self.state.transitions, 'max_speed_mps': self.state.max_speed,
+                'sim_time_s': self.state.t}
+
+
+@dataclass(frozen=True)
+class FeederModel:
+    """Immutable particle-on-surface model (parameters, contact tables, packed kernel inputs).
+
+    Build with :meth:`from_settings` (flat ``{dotted name: value}``, as read from config/feeder.yaml
+    and ``--set``) or with the parameter groups directly. ``contact_model`` may be given to reuse
+    tables or to substitute test variants (any object with ``tables`` and ``pull_off_n``).
+    ``base_acceleration``: an optional one-channel :class:`StrokeTable` whose s̈ (m/s²) shakes the
+    whole feeder along x (used for the flat-surface threshold check of DYNAMICS.md §7.1).
+    """
+
+    particle: ParticleParams = field(default_factory=ParticleParams)
+    contact: ContactParams = field(default_factory=ContactParams)
+    surface: SurfaceParams = field(default_factory=SurfaceParams)
+    stroke: StrokeParams = field(default_factory=StrokeParams)
+    piezo: PiezoParams = field(default_factory=PiezoParams)
+    integration: IntegrationParams = field(default_factory=IntegrationParams)
+    detach: DetachParams = field(default_factory=DetachParams)
+    landing: LandingParams = field(default_factory=LandingParams)
+    contact_model: Any = None
+    base_acceleration: StrokeTable | None = None
+
+    def __post_init__(self) -> None:
+        if self.contact_model is None:
+            object.__setattr__(self, 'contact_model', ContactModel(self.contact, self.particle))
+        object.__setattr__(self, '_waveform', waveform_table(self.stroke, self.surface.n_actuators))
+        tables = self.contact_model.tables
+        prm = np.zeros(k.N_PRM)
+        prm[k.P_MASS] = self.particle.mass
+        prm[k.P_GRAVITY] = self.particle.gravity
+        prm[k.P_PULL_OFF] = self.contact_model.pull_off_n
+        prm[k.P_DT] = self.integration.dt
+        prm[k.P_EVENT_TOL] = self.integration.event_tolerance
+        prm[k.P_CONVECTIVE] = self.integration.convective_terms
+        prm[k.P_INCLUDE_WEIGHT] = self.detach.include_weight
+        prm[k.P_LANDING_RELATIVE] = self.landing.velocity == 'relative'
+        prm[k.P_THRESHOLD] = self.integration.friction_logic == 'threshold'
+        prm[k.P_PIEZO] = self.piezo.enabled
+        prm[k.P_PIEZO_OMEGA] = self.piezo.omega_n
+        prm[k.P_PIEZO_ZETA] = self.piezo.damping
+        prm[k.P_PIEZO_MIN] = self.piezo.stroke_min
+        prm[k.P_PIEZO_MAX] = self.piezo.stroke_max
+        prm[k.P_HAS_BASE] = self.base_acceleration is not None
+        packed = (prm, np.asarray(self.surface.centers, dtype=float),
+                  np.asarray(self.surface.widths, dtype=float),
+                  *(np.ascontiguousarray(getattr(tables, name), dtype=float)
+                    for name in ('load_n', 'q_max_n', 'separation_m', 'gap_m', 'attraction_n')),
+                  self.surface.n_actuators)
+        object.__setattr__(self, '_packed', packed)
+
+    @classmethod
+    def from_settings(cls, flat: Mapping[str, Any], **overrides: Any) -> FeederModel:
+        """Build every group from a flat ``{dotted name: value}`` mapping (defaults for missing names).
+
+        Raises :class:`~micro_feeder.physics.parameters.ParameterError` naming a refused parameter.
+        """
+        groups = {name: group.from_flat(flat) for name, group in (
+            ('particle', ParticleParams), ('contact', ContactParams), ('surface', SurfaceParams),
+            ('stroke', StrokeParams), ('piezo', PiezoParams), ('integration', IntegrationParams),
+            ('detach', DetachParams), ('landing', LandingParams))}
+        return cls(**groups, **overrides)
+
+    def replace(self, **changes: Any) -> FeederModel:
+        """A model with some groups replaced (the contact tables are reused unless contact or particle
+        parameters change)."""
+        keep_contact = 'contact' not in changes and 'particle' not in changes
+        contact_model = changes.pop('contact_model', self.contact_model if keep_contact else None)
+        current = {name: getattr(self, name) for name in (
+            'particle', 'contact', 'surface', 'stroke', 'piezo', 'integration', 'detach', 'landing',
+            'base_acceleration')}
+        return FeederModel(**{**current, **changes}, contact_model=contact_model)
+
+    @property
+    def n_actuators(self) -> int:
+        return self.surface.n_actuators
+
+    def waveform(self) -> StrokeTable:
+        """The analytic stroke burst of the ``stroke.*`` parameters (the default stroke source)."""
+        return self._waveform
+
+    def default_duration(self) -> float:
+        """End of the last stroke plus ``integration.settling_time`` (s)."""
+        return self.stroke.burst_end_s() + self.integration.settling_time
+
+    def initial_state(self, x0: float | None = None) -> FeederState:
+        """t = 0, part stuck at ``x0`` (default ``particle.x0``), at rest."""
+        return FeederState(self.n_actuators, self.particle.x0 if x0 is None else x0)
+
+    def flying_state(self, x: float, z: float, vx: float, vz: float, t: float = 0.0) -> FeederState:
+        """A part in flight at (x, z) (m) with velocity (vx, vz) (m/s) at time ``t``."""
+        state = FeederState(self.n_actuators, x)
+        state.y[:4] = x, vx, z, vz
+        state.iv[k.IV_MODE] = k.FLYING
+        state.fs[k.FS_T] = t
+        return state
+
+    def advance(self, state: FeederState, t_target: float,
+                source: StrokeTable | StrokeSchedule | None = None) -> list[Event]:
+        """Integrate ``state`` in place to ``t_target`` (s) and return the mode changes on the way.
+
+        ``source``: the stroke command (a table or a :class:`StrokeSchedule`; default the analytic
+        waveform). Work is split at the schedule's switch times. Raises :class:`SimulationError`
+        (time, mode, state) instead of producing a non-finite state.
+        """
+        events, _ = self._integrate(state, t_target, source, record=False)
+        return events
+
+    def run(self, duration: float | None = None, source: StrokeTable | StrokeSchedule | None = None,
+            state: FeederState | None = None) -> RunResult:
+        """Simulate from ``state`` (default: the initial state) for ``duration`` (default
+        :meth:`default_duration`) and return the time series (one row per step and per event)."""
+        state = self.initial_state() if state is None else state
+        t_end = state.t + (self.default_duration() if duration is None else duration)
+        rows = [self._observe_row(state, source)]
+        events, recorded = self._integrate(state, t_end, source, record=True)
+        data = np.vstack(rows + recorded)
+        return RunResult(self.columns(), data, events, state)
+
+    def columns(self) -> tuple[str, ...]:
+        """Names of the recorded columns (then ``stroke_k`` per actuator)."""
+        return k.COLUMN_NAMES + tuple(f'stroke_{i}' for i in range(self.n_actuators))
+
+    def observe(self, state: FeederState, source: StrokeTable | StrokeSchedule | None = None) -> Observation:
+        """The outputs of DYNAMICS.md §6 at ``state.t`` (does not change the state)."""
+        row = self._observe_row(state, source)
+        values = dict(zip(k.COLUMN_NAMES, row[0, :k.N_FIXED_COLUMNS].tolist(), strict=True))
+        values['mode'] = MODES[int(values['mode'])]
+        return Observation(**values, strokes=row[0, k.N_FIXED_COLUMNS:].copy())
+
+    # ------------------------------------------------------------------------------------------------
+
+    def _source_table(self, source: StrokeTable | None) -> StrokeTable:
+        table = self._waveform if source is None else source
+        if table.n_channels != self.n_actuators:
+            raise ValueError(f'stroke source has {table.n_channels} channels, the surface '
+                             f'{self.n_actuators} actuators')
+        if self.base_acceleration is not None:
+            table = stack_tables([table, self.base_acceleration])
+        return table
+
+    def _segments(self, t0: float, t1: float, source: StrokeTable | StrokeSchedule | None
+                  ) -> list[tuple[float, tuple]]:
+        """(end time, kernel source) pieces covering (t0, t1] according to the schedule."""
+        if not isinstance(source, StrokeSchedule):
+            return [(t1, self._source_table(source).as_tuple())]
+        pieces = source.pieces
+        out = []
+        for i, (t_from, table) in enumerate(pieces):
+            t_until = pieces[i + 1][0] if i + 1 < len(pieces) else math.inf
+            if t_until > t0 and t_from < t1:
+                out.append((min(t_until, t1), self._source_table(table).as_tuple()))
+        return out
+
+    def _observe_row(self, state: FeederState, source: StrokeTable | StrokeSchedule | None) -> np.ndarray:
+        table = source.table_at(state.t) if isinstance(source, StrokeSchedule) else source
+        src = self._source_table(table).as_tuple()
+        n_ch = src[0].size
+        cur = np.zeros((n_ch, 2), dtype=np.int64)
+        k.locate_all(src, state.t, cur)
+        row = np.zeros((1, k.N_FIXED_COLUMNS + self.n_actuators))
+        k.observe(state.t, state.y, state.iv, self._packed, src, cur, np.zeros((3, n_ch)),
+                  np.zeros(k.N_AUX), np.zeros(state.y.size), row[0])
+        return row
+
+    def _integrate(self, state: FeederState, t_target: float,
+                   source: StrokeTable | StrokeSchedule | None, record: bool
+                   ) -> tuple[list[Event], list[np.ndarray]]:
+        prm = self._packed[0].copy()
+        prm[k.P_RECORD] = record
+        packed = (prm, *self._packed[1:])
+        ev_i = np.zeros((256, 3), dtype=np.int64)
+        ev_f = np.zeros((256, 2))
+        rec = np.zeros((4096 if record else 2, k.N_FIXED_COLUMNS + self.n_actuators))
+        events: list[Event] = []
+        recorded: list[np.ndarray] = []
+        scratch = np.zeros((9, state.y.size))
+        aux = np.zeros(k.N_AUX)
+        for t_until, src in self._segments(state.t, t_target, source):
+            st = np.zeros((3, src[0].size))
+            cur = np.zeros((src[0].size, 2), dtype=np.int64)
+            while state.t < t_until:
+                status, n_ev, n_rec = k.advance(state.y, state.iv, state.fs, t_until, packed, src,
+                                                ev_i, ev_f, rec, 0, scratch, st, aux, cur)
+                events.extend(Event(float(ev_f[i, 0]), EVENT_KINDS[ev_i[i, 0]], MODES[ev_i[i, 1]],
+                                    MODES[ev_i[i, 2]], float(ev_f[i, 1])) for i in range(n_ev))
+                if record and n_rec:
+                    recorded.append(rec[:n_rec].copy())
+                if status in (k.NON_FINITE, k.EVENT_NOT_LOCATED, k.CHATTER):
+                    raise SimulationError(self._failure(status, state))
+        return events, recorded
+
+    def _failure(self, status: int, state: FeederState) -> str:
+        what = {k.NON_FINITE: 'the state or the contact load became non-finite',
+                k.EVENT_NOT_LOCATED: 'an event could not be located within integration.event_tolerance',
+                k.CHATTER: 'more than 8 mode changes at the same instant (chatter)'}[status]
+        return (f'{what} at t = {state.t:.9g} s in mode {state.mode} '
+                f'(x = {state.x:.9g} m, state vector {state.y.tolist()}); '
+                f'try a smaller integration.dt')

@@ -1,0 +1,57 @@
+"""Parameter groups of the particle dynamics: integration, detachment and landing rules."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..parameters import ParameterGroup, param
+
+FRICTION_LOGICS = ('events', 'threshold')
+LANDING_VELOCITIES = ('relative', 'absolute')
+
+
+@dataclass(frozen=True)
+class IntegrationParams(ParameterGroup):
+    """How the motion is integrated (DYNAMICS.md §5)."""
+
+    prefix = 'integration'
+
+    dt: float = param(2e-6, 'Runge-Kutta (RK4) step, also the sampling step of the event checks while '
+                      'stuck; the default keeps distance per stroke within 0.1 % of the dt -> 0 limit '
+                      '(docs/dynamics.md)', 's', gt=0, le=1e-3)
+    event_tolerance: float = param(1e-9, 'time tolerance of event location', 's', gt=0, le=1e-6)
+    friction_logic: str = param('events', "'events': exact stick/slip switching by event location; "
+                                "'threshold': the seed's threshold-velocity logic V_th = Q_max dt / m",
+                                choices=FRICTION_LOGICS)
+    convective_terms: bool = param(True, 'keep 2 h_xt xdot + h_xx xdot^2 in the normal load (false: the '
+                                   "seed's form, normal acceleration = surface acceleration)")
+    settling_time: float = param(2e-3, 'default run length beyond the end of the last stroke', 's', ge=0)
+
+
+@dataclass(frozen=True)
+class DetachParams(ParameterGroup):
+    """When the part leaves the surface (DYNAMICS.md §4.2)."""
+
+    prefix = 'detach'
+
+    include_weight: bool = param(True, 'take-off when N + F_po < 0 with the weight inside N (false: the '
+                                 "seed's test of the inertial load alone against F_po)")
+
+
+@dataclass(frozen=True)
+class LandingParams(ParameterGroup):
+    """What velocity a landing part keeps (DYNAMICS.md §4.2)."""
+
+    prefix = 'landing'
+
+    velocity: str = param('relative', "'relative': keep the tangential velocity relative to the surface; "
+                          "'absolute': keep the tangential component of the absolute velocity (seed)",
+                          choices=LANDING_VELOCITIES)
+
+
+def dynamics_parameter_groups() -> list[type[ParameterGroup]]:
+    """The parameter groups of the surface, stroke, piezo and dynamics (for settings.PARAMETER_GROUPS)."""
+    from ..piezo import PiezoParams
+    from ..surface import SurfaceParams
+    from ..waveforms import StrokeParams
+    return [SurfaceParams, StrokeParams, PiezoParams, IntegrationParams, DetachParams, LandingParams]

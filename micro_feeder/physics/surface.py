@@ -1,0 +1,73 @@
+"""The deformed surface: one Gaussian bump per actuator, with closed-form derivatives.
+
+h(x, t) = Σ_k s_k(t) g_k(x),  g_k(x) = exp(−(x − c_k)² / (2 w_k²))  (DYNAMICS.md §2).
+Material points move vertically only, so every derivative follows from the strokes (s, ṡ, s̈) and
+g, g', g'' in closed form; nothing is differentiated numerically.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ._jit import jit
+from .parameters import ParameterError, ParameterGroup, param
+
+
+@dataclass(frozen=True)
+class SurfaceParams(ParameterGroup):
+    """Where the actuators push the surface and how wide each bump is (one entry per actuator)."""
+
+    prefix = 'surface'
+
+    centers: tuple = param((0.0,), 'actuator positions c_k along the feeder (frame feeder, x)', 'm',
+                           min_length=1)
+    widths: tuple = param((1e-3,), 'Gaussian profile widths w_k (standard deviation of the bump)', 'm',
+                          min_length=1, gt=0)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if len(self.widths) != len(self.centers):
+            raise ParameterError('surface.widths', list(self.widths),
+                                 f'one width per actuator ({len(self.centers)} surface.centers)')
+
+    @property
+    def n_actuators(self) -> int:
+        """Number of actuators (bumps)."""
+        return len(self.centers)
+
+
+@jit
+def surface_at(x: float, s: np.ndarray, sd: np.ndarray, sdd: np.ndarray, centers: np.ndarray,
+               widths: np.ndarray) -> tuple[float, float, float, float, float, float]:
+    """(h, h_x, h_xx, h_t, h_tt, h_xt) at position ``x`` (m) for strokes s (m), ṡ (m/s), s̈ (m/s²).
+
+    Only the first ``centers.size`` entries of the stroke arrays are read.
+    """
+    h = hx = hxx = ht = htt = hxt = 0.0
+    for k in range(centers.size):
+        w = widths[k]
+        u = (x - centers[k]) / w
+        g = math.exp(-0.5 * u * u)
+        g1 = -u / w * g
+        g2 = (u * u - 1.0) / (w * w) * g
+        h += s[k] * g
+        hx += s[k] * g1
+        hxx += s[k] * g2
+        ht += sd[k] * g
+        htt += sdd[k] * g
+        hxt += sd[k] * g1
+    return h, hx, hxx, ht, htt, hxt
+
+
+def surface_profile(x: np.ndarray, strokes: np.ndarray, centers: np.ndarray | tuple,
+                    widths: np.ndarray | tuple) -> np.ndarray:
+    """Surface height h (m) at the positions ``x`` (m) for the given strokes (m), vectorised.
+
+    For drawing the deformed surface (plots, RViz markers); the dynamics use :func:`surface_at`.
+    """
+    x = np.asarray(x, dtype=float)[..., None]
+    u = (x - np.asarray(centers, dtype=float)) / np.asarray(widths, dtype=float)
+    return np.exp(-0.5 * u * u) @ np.asarray(strokes, dtype=float)

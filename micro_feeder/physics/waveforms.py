@@ -1,0 +1,407 @@
+"""Actuator strokes s_k(t) with exact ṡ and s̈: analytic waveforms and commanded trajectories.
+
+Every stroke source compiles to a :class:`StrokeTable`: per actuator (channel), a pattern of
+segments repeated ``count`` times with a ``period``, starting at ``start``. Each segment is
+
+    s(τ) = Σ_{i=0..5} c_i τ^i + C cos(ωτ) + S sin(ωτ),   τ = t − (segment start)  (s in m, t in s),
+
+which represents every shape exactly: the raised cosine, sine, half sine and asymmetric shapes (one
+trigonometric term), the jerk-limited trapezoid and the ``samples`` spline (cubics), and the quintic /
+cubic Hermite pieces of a commanded trajectory. Segment boundaries are hard breakpoints: the integrator
+ends its steps there and evaluates each side from its own segment (DYNAMICS.md §4.4). Outside the
+repeated pattern the stroke holds a constant (``before`` / ``after``; 0 for a waveform burst, the last
+knot's position for a trajectory).
+
+Waveform conventions (DYNAMICS.md §3): a stroke lasts 1/f; ``count`` strokes follow each other
+separated by ``pause`` seconds; the burst starts after ``delay``; actuator k is delayed by
+``phases[k]/f``; s = 0 outside the burst.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+from ._jit import jit
+from .parameters import ParameterError, ParameterGroup, param
+
+WAVEFORMS = ('raised_cosine', 'sine', 'half_sine', 'trapezoid', 'asymmetric', 'samples')
+
+# Layout of one segment's coefficient row.
+N_POLY = 6                      # c_0 .. c_5
+COEF_COS, COEF_SIN, COEF_OMEGA = 6, 7, 8
+N_COEF = 9
+
+
+@dataclass(frozen=True)
+class StrokeParams(ParameterGroup):
+    """The analytic stroke waveform driving every actuator (DYNAMICS.md §3)."""
+
+    prefix = 'stroke'
+
+    waveform: str = param('raised_cosine', 'stroke shape over one period', choices=WAVEFORMS)
+    amplitude: float = param(100e-6, 'peak stroke A (raised_cosine: s goes 0 -> A -> 0)', 'm', ge=0)
+    frequency: float = param(1000.0, 'stroke frequency f; one stroke lasts 1/f', 'Hz', gt=0, le=1e7)
+    count: int = param(1, 'number of strokes in the burst', ge=1)
+    pause: float = param(0.0, 'rest between consecutive strokes', 's', ge=0)
+    delay: float = param(0.0, 'time before the burst starts', 's', ge=0)
+    duty: float = param(0.5, 'asymmetric: fraction of the period spent rising; trapezoid: fraction '
+                        'held at the top', '', gt=0, lt=1)
+    phases: tuple = param((0.0,), 'per-actuator delay in stroke periods (0.25 = a quarter period); '
+                          'one entry per surface.centers entry', '', min_length=1, ge=0)
+    samples: tuple = param((0.0, 0.5, 1.0, 0.5), 'samples waveform: stroke as a fraction of amplitude '
+                           'at equally spaced phases over one period (periodic cubic spline)', '',
+                           min_length=4)
+
+    @property
+    def period_s(self) -> float:
+        """Time from the start of one stroke to the start of the next (1/f + pause)."""
+        return 1.0 / self.frequency + self.pause
+
+    def burst_end_s(self) -> float:
+        """Time at which the last stroke of the last actuator ends."""
+        return self.delay + max(self.phases) / self.frequency + self.count / self.frequency \
+            + (self.count - 1) * self.pause
+
+
+@dataclass(frozen=True)
+class StrokeTable:
+    """A compiled stroke source for the kernel: one row per channel (actuator), SI units.
+
+    ``seg_start[k, i]`` is the start of segment i within the period (``seg_start[k, n_seg[k]]`` equals
+    the period, the end of the last segment); ``seg_coef[k, i]`` its coefficients (layout in the module
+    docstring). Before ``start[k]`` the stroke is ``before[k]``; after ``start + count·period`` it is
+    ``after[k]`` (velocity and acceleration zero in both).
+    """
+
+    start: np.ndarray
+    period: np.ndarray
+    count: np.ndarray
+    before: np.ndarray
+    after: np.ndarray
+    seg_start: np.ndarray
+    seg_coef: np.ndarray
+    n_seg: np.ndarray
+
+    @property
+    def n_channels(self) -> int:
+        return int(self.start.size)
+
+    def as_tuple(self) -> tuple:
+        """The arrays in the order the kernel expects."""
+        return (self.start, self.period, self.count, self.before, self.after, self.seg_start,
+                self.seg_coef, self.n_seg)
+
+    def evaluate(self, t: float) -> np.ndarray:
+        """(3, n_channels) array of s (m), ṡ (m/s), s̈ (m/s²) at time ``t`` (right-continuous)."""
+        out = np.empty((3, self.n_channels))
+        src = self.as_tuple()
+        for k in range(self.n_channels):
+            j, i = locate_segment(src, k, t)
+            out[:, k] = channel_value(src, k, j, i, t)
+        return out
+
+    def end_time(self) -> float:
+        """Time after which every channel holds its final value."""
+        return float(np.max(self.start + self.count * self.period))
+
+
+def stack_tables(tables: Sequence[StrokeTable]) -> StrokeTable:
+    """One table whose channels are those of ``tables`` in order (segments padded to a common size)."""
+    n_max = max(int(t.seg_coef.shape[1]) for t in tables)
+    seg_start, seg_coef = [], []
+    for t in tables:
+        pad = n_max - t.seg_coef.shape[1]
+        seg_start.append(np.pad(t.seg_start, ((0, 0), (0, pad)), mode='edge'))
+        seg_coef.append(np.pad(t.seg_coef, ((0, 0), (0, pad), (0, 0))))
+    cat = np.concatenate
+    return StrokeTable(cat([t.start for t in tables]), cat([t.period for t in tables]),
+                       cat([t.count for t in tables]), cat([t.before for t in tables]),
+                       cat([t.after for t in tables]), cat(seg_start), cat(seg_coef),
+                       cat([t.n_seg for t in tables]))
+
+
+# ----------------------------------------------------------------------------------------------------
+# Kernel-side evaluation (compiled)
+
+@jit
+def locate_segment(src: tuple, k: int, t: float) -> tuple[int, int]:
+    """(period index j, segment index i) active at time ``t`` on channel ``k`` (right-continuous).
+
+    j = -1: before the pattern starts; j = -2: after it ends. A time exactly on a boundary belongs to
+    the segment that starts there, so a step that ended on a breakpoint continues on the next segment.
+    """
+    start, period, count, _, _, seg_start, _, n_seg = src
+    if t < start[k]:
+        return -1, 0
+    if t >= start[k] + count[k] * period[k]:
+        return -2, 0
+    j = min(max(int((t - start[k]) // period[k]), 0), int(count[k]) - 1)
+    tau = t - (start[k] + j * period[k])
+    n = n_seg[k]
+    i = min(max(int(np.searchsorted(seg_start[k, :n + 1], tau, side='right')) - 1, 0), n - 1)
+    while segment_end(src, k, j, i) <= t:     # rounding: the boundary computed as the integrator does
+        i += 1
+        if i == n:
+            i = 0
+            j += 1
+            if j >= count[k]:
+                return -2, 0
+    return j, i
+
+
+@jit
+def segment_end(src: tuple, k: int, j: int, i: int) -> float:
+    """Time (s) at which segment (j, i) of channel ``k`` ends: the next hard breakpoint."""
+    start, period, _, _, _, seg_start, _, _ = src
+    if j == -1:
+        return start[k]
+    if j == -2:
+        return math.inf
+    return start[k] + j * period[k] + seg_start[k, i + 1]
+
+
+@jit
+def channel_value(src: tuple, k: int, j: int, i: int, t: float) -> tuple[float, float, float]:
+    """(s, ṡ, s̈) of channel ``k`` at ``t`` evaluated on segment (j, i), which may be extrapolated a
+    little past its end (a step ending on a breakpoint evaluates its last stage from the left side)."""
+    start, period, _, before, after, seg_start, seg_coef, _ = src
+    if j == -1:
+        return before[k], 0.0, 0.0
+    if j == -2:
+        return after[k], 0.0, 0.0
+    tau = t - (start[k] + j * period[k] + seg_start[k, i])
+    c = seg_coef[k, i]
+    s = c[5]
+    sd = 5.0 * c[5]
+    sdd = 20.0 * c[5]
+    for p in range(4, -1, -1):      # Horner on the polynomial and its two derivatives
+        s = s * tau + c[p]
+        if p >= 1:
+            sd = sd * tau + p * c[p]
+        if p >= 2:
+            sdd = sdd * tau + p * (p - 1) * c[p]
+    w = c[COEF_OMEGA]
+    if c[COEF_COS] != 0.0 or c[COEF_SIN] != 0.0:
+        cw = math.cos(w * tau)
+        sw = math.sin(w * tau)
+        trig = c[COEF_COS] * cw + c[COEF_SIN] * sw
+        s += trig
+        sd += w * (c[COEF_SIN] * cw - c[COEF_COS] * sw)
+        sdd -= w * w * trig
+    return s, sd, sdd
+
+
+# ----------------------------------------------------------------------------------------------------
+# Building tables
+
+def _segment(poly: Sequence[float] = (), cos: float = 0.0, sin: float = 0.0, omega: float = 0.0) -> np.ndarray:
+    row = np.zeros(N_COEF)
+    row[:len(poly)] = poly
+    row[COEF_COS], row[COEF_SIN], row[COEF_OMEGA] = cos, sin, omega
+    return row
+
+
+def _scurve_ramp() -> list[tuple[float, np.ndarray]]:
+    """A 0 -> 1 ramp over unit time with a triangular acceleration (constant-jerk pieces, jerk-limited).
+
+    Jerk +J on [0, 1/4], −J on [1/4, 3/4], +J on [3/4, 1]; J makes the ramp end at exactly 1.
+    Returns (piece start, cubic coefficients in local time) for each of the three pieces.
+    """
+    bounds = (0.0, 0.25, 0.75, 1.0)
+    signs = (1.0, -1.0, 1.0)
+
+    def pieces(jerk: float) -> tuple[list[tuple[float, np.ndarray]], float]:
+        p = v = a = 0.0
+        out = []
+        for (t0, t1), sign in zip(itertools.pairwise(bounds), signs, strict=True):
+            j = sign * jerk
+            out.append((t0, np.array([p, v, a / 2.0, j / 6.0])))
+            d = t1 - t0
+            p, v, a = p + v * d + a * d * d / 2 + j * d ** 3 / 6, v + a * d + j * d * d / 2, a + j * d
+        return out, p
+
+    _, reach = pieces(1.0)
+    return pieces(1.0 / reach)[0]
+
+
+def _unit_pattern(params: StrokeParams) -> list[tuple[float, np.ndarray]]:
+    """One stroke of unit amplitude over unit phase: (segment start in phase, coefficients in phase)."""
+    two_pi = 2.0 * math.pi
+    shape, duty = params.waveform, params.duty
+    if shape == 'raised_cosine':
+        return [(0.0, _segment([0.5], cos=-0.5, omega=two_pi))]
+    if shape == 'sine':
+        return [(0.0, _segment(sin=1.0, omega=two_pi))]
+    if shape == 'half_sine':
+        return [(0.0, _segment(sin=1.0, omega=math.pi))]
+    if shape == 'asymmetric':
+        return [(0.0, _segment([0.5], cos=-0.5, omega=math.pi / duty)),
+                (duty, _segment([0.5], cos=0.5, omega=math.pi / (1.0 - duty)))]
+    if shape == 'trapezoid':
+        ramp = (1.0 - duty) / 2.0
+        out = []
+        for start, cubic in _scurve_ramp():      # rise, then hold at 1, then the mirrored fall
+            out.append((start * ramp, _segment(cubic / ramp ** np.arange(4))))
+        out.append((ramp, _segment([1.0])))
+        for start, cubic in _scurve_ramp():
+            fall = -cubic / ramp ** np.arange(4)
+            fall[0] += 1.0
+            out.append((ramp + duty + start * ramp, _segment(fall)))
+        return out
+    values = np.asarray(params.samples, dtype=float)
+    phase = np.linspace(0.0, 1.0, values.size + 1)
+    spline = CubicSpline(phase, np.append(values, values[0]), bc_type='periodic')
+    return [(phase[i], _segment(spline.c[::-1, i])) for i in range(values.size)]
+
+
+def waveform_table(params: StrokeParams, n_actuators: int) -> StrokeTable:
+    """The analytic stroke burst of ``params`` on ``n_actuators`` actuators (phases per actuator)."""
+    if len(params.phases) != n_actuators:
+        raise ParameterError('stroke.phases', list(params.phases),
+                             f'one phase per actuator ({n_actuators} surface.centers)')
+    f, amplitude = params.frequency, params.amplitude
+    pattern = _unit_pattern(params)
+    starts = [p / f for p, _ in pattern]
+    rows = []
+    for _, coef in pattern:                       # phase -> time: c_i f^i, ω f; scale by A
+        row = coef.copy()
+        row[:N_POLY] *= amplitude * f ** np.arange(N_POLY)
+        row[COEF_COS:COEF_OMEGA] *= amplitude
+        row[COEF_OMEGA] *= f
+        rows.append(row)
+    if params.pause > 0:
+        starts.append(1.0 / f)
+        rows.append(_segment())
+    starts.append(params.period_s)
+    n = len(rows)
+    return StrokeTable(
+        start=params.delay + np.asarray(params.phases, dtype=float) / f,
+        period=np.full(n_actuators, params.period_s),
+        count=np.full(n_actuators, params.count, dtype=np.int64),
+        before=np.zeros(n_actuators), after=np.zeros(n_actuators),
+        seg_start=np.tile(np.asarray(starts), (n_actuators, 1)),
+        seg_coef=np.tile(np.asarray(rows), (n_actuators, 1, 1)),
+        n_seg=np.full(n_actuators, n, dtype=np.int64))
+
+
+def trajectory_table(times: Sequence[float], positions: np.ndarray, velocities: np.ndarray | None = None,
+                     accelerations: np.ndarray | None = None) -> StrokeTable:
+    """Piecewise Hermite interpolation through knots (DYNAMICS.md §3.2), holding the last position after.
+
+    ``times`` (n,) absolute sim times (s), strictly increasing; ``positions``, ``velocities``,
+    ``accelerations`` (n, n_actuators) in m, m/s, m/s². Quintic Hermite when accelerations are given
+    (s̈ continuous), cubic when only velocities are, linear when only positions are
+    (joint_trajectory_controller's rules). A single knot holds that position from its time on.
+    """
+    times = np.asarray(times, dtype=float)
+    pos = np.atleast_2d(np.asarray(positions, dtype=float))
+    if pos.shape[0] != times.size:
+        pos = pos.T
+    n_knots, n_act = pos.shape
+    if n_knots < 1 or times.size != n_knots or np.any(np.diff(times) <= 0) or not np.all(np.isfinite(pos)):
+        raise ValueError('trajectory needs strictly increasing knot times and finite positions, '
+                         'one row per knot')
+    vel = None if velocities is None else np.asarray(velocities, dtype=float).reshape(n_knots, n_act)
+    acc = None if accelerations is None or vel is None else \
+        np.asarray(accelerations, dtype=float).reshape(n_knots, n_act)
+    n_seg = max(n_knots - 1, 1)
+    coef = np.zeros((n_act, n_seg, N_COEF))
+    for i in range(n_knots - 1):
+        d = times[i + 1] - times[i]
+        p0, p1 = pos[i], pos[i + 1]
+        if vel is None:
+            coef[:, i, 0], coef[:, i, 1] = p0, (p1 - p0) / d
+            continue
+        v0, v1 = vel[i], vel[i + 1]
+        a0 = np.zeros(n_act) if acc is None else acc[i]
+        a1 = np.zeros(n_act) if acc is None else acc[i + 1]
+        coef[:, i, 0], coef[:, i, 1], coef[:, i, 2] = p0, v0, a0 / 2
+        if acc is None:                          # cubic Hermite
+            coef[:, i, 2] = (3 * (p1 - p0) - (2 * v0 + v1) * d) / d ** 2
+            coef[:, i, 3] = (2 * (p0 - p1) + (v0 + v1) * d) / d ** 3
+        else:                                    # quintic Hermite
+            dp = p1 - p0 - v0 * d - a0 * d * d / 2
+            dv = v1 - v0 - a0 * d
+            da = a1 - a0
+            coef[:, i, 3] = (10 * dp - 4 * dv * d + da * d * d / 2) / d ** 3
+            coef[:, i, 4] = (-15 * dp + 7 * dv * d - da * d * d) / d ** 4
+            coef[:, i, 5] = (6 * dp - 3 * dv * d + da * d * d / 2) / d ** 5
+    if n_knots == 1:                             # a constant segment, then the same value held
+        coef[:, 0, 0] = pos[0]
+        span = np.array([0.0, 1.0])
+    else:
+        span = times - times[0]
+    return StrokeTable(
+        start=np.full(n_act, times[0]), period=np.full(n_act, span[-1]),
+        count=np.ones(n_act, dtype=np.int64), before=pos[0].copy(), after=pos[-1].copy(),
+        seg_start=np.tile(span, (n_act, 1)), seg_coef=coef, n_seg=np.full(n_act, n_seg, dtype=np.int64))
+
+
+class StrokeSchedule:
+    """Stroke sources in force from given sim times on: what the simulator node feeds the model.
+
+    Starts with one table (e.g. the analytic waveform, or a constant hold). A commanded trajectory
+    replaces the rest of the current source from its start time on (joint_trajectory_controller
+    semantics); the model's ``advance`` splits its work at every switch time.
+    """
+
+    def __init__(self, initial: StrokeTable, t_from: float = -math.inf):
+        self._pieces: list[tuple[float, StrokeTable]] = [(t_from, initial)]
+
+    @property
+    def pieces(self) -> list[tuple[float, StrokeTable]]:
+        """(time from which it applies, table), in increasing time."""
+        return list(self._pieces)
+
+    def table_at(self, t: float) -> StrokeTable:
+        """The table in force at time ``t``."""
+        table = self._pieces[0][1]
+        for t_from, candidate in self._pieces:
+            if t_from <= t:
+                table = candidate
+        return table
+
+    def evaluate(self, t: float) -> np.ndarray:
+        """(3, n_channels) s, ṡ, s̈ at ``t`` from the table in force."""
+        return self.table_at(t).evaluate(t)
+
+    def replace_from(self, t_start: float, table: StrokeTable) -> None:
+        """Use ``table`` from ``t_start`` on, dropping whatever was scheduled at or after that time."""
+        self._pieces = [(t, tab) for t, tab in self._pieces if t < t_start] + [(t_start, table)]
+
+    def command_trajectory(self, t_start: float, knot_times: Sequence[float], positions: np.ndarray,
+                           velocities: np.ndarray | None = None,
+                           accelerations: np.ndarray | None = None) -> StrokeTable:
+        """Replace the schedule from ``t_start`` with a trajectory through the given knots.
+
+        ``knot_times`` are absolute sim times (header stamp + time_from_start); knots at or before
+        ``t_start`` are dropped. When the first remaining knot lies after ``t_start``, the current
+        stroke (s, ṡ, s̈ at ``t_start``) becomes the first knot, so the stroke stays continuous. An
+        empty trajectory holds the current position. Returns the table now in force from ``t_start``.
+        """
+        times = np.asarray(knot_times, dtype=float)
+        keep = times > t_start
+        current = self.evaluate(t_start)
+        n_act = current.shape[1]
+
+        def rows(values: np.ndarray | None, first: np.ndarray) -> np.ndarray | None:
+            if values is None:
+                return None
+            values = np.asarray(values, dtype=float).reshape(times.size, n_act)[keep]
+            return np.vstack([first, values])
+
+        table = trajectory_table(np.concatenate([[t_start], times[keep]]),
+                                 rows(positions, current[0]), rows(velocities, current[1]),
+                                 rows(accelerations, current[2]))
+        self.replace_from(t_start, table)
+        return table
+
+    def hold_from(self, t_start: float) -> StrokeTable:
+        """Stop: hold the stroke at its position at ``t_start`` (an empty trajectory message)."""
+        return self.command_trajectory(t_start, [], np.zeros((0, self.evaluate(t_start).shape[1])))
