@@ -1,0 +1,39 @@
+"""The micro_feeder topics of DESIGN.md §3, with their types and the QoS their publishers offer.
+
+Plain data (no rclpy) so that the logs library, the nodes and the tests share one table. Names are
+relative (``particle/pose``) so that a node namespace applies; ``/clock`` and ``/diagnostics`` are
+absolute by ROS convention.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class TopicSpec:
+    """One topic: name, ``pkg/msg/Type``, and QoS (reliable or best effort, transient local or
+    volatile, keep-last depth)."""
+
+    name: str
+    type: str
+    reliable: bool = True
+    transient_local: bool = False
+    depth: int = 10
+
+
+TOPICS: tuple[TopicSpec, ...] = (
+    TopicSpec('actuator/trajectory', 'trajectory_msgs/msg/JointTrajectory', depth=10),
+    TopicSpec('actuator/command', 'std_msgs/msg/Float64MultiArray', depth=10),
+    TopicSpec('actuator/joint_states', 'sensor_msgs/msg/JointState', depth=100),
+    TopicSpec('particle/pose', 'geometry_msgs/msg/PoseStamped', depth=100),
+    TopicSpec('particle/twist', 'geometry_msgs/msg/TwistStamped', depth=100),
+    TopicSpec('particle/contact_wrench', 'geometry_msgs/msg/WrenchStamped', depth=100),
+    TopicSpec('particle/contact_state', 'std_msgs/msg/String', transient_local=True, depth=1),
+    TopicSpec('surface/markers', 'visualization_msgs/msg/MarkerArray', depth=1),
+    TopicSpec('/clock', 'rosgraph_msgs/msg/Clock', reliable=False, depth=1),
+    TopicSpec('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', depth=10),
+)
+
+TOPICS_BY_NAME = {spec.name: spec for spec in TOPICS}
+
