@@ -1,0 +1,137 @@
+"""A log's summary: topics, types, counts, rates, duration, final part state, recorder loss counters.
+
+The loss counters come from the recorder: its ``micro_feeder.recorder`` metadata record on a clean stop,
+or, in a truncated log, the last of its ``/diagnostics`` messages that made it to disk (same keys).
+"""
+
+from __future__ import annotations
+
+import datetime
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .reader import LogReader
+
+RECORDER_STATUS_PREFIX = 'recorder'
+
+
+@dataclass
+class TopicRow:
+    """One topic of the summary: name, type, count, average rate [Hz] over the log's duration."""
+
+    name: str
+    type: str
+    count: int
+    rate: float
+
+
+@dataclass
+class PartState:
+    """The part's last recorded state: stamp [s], position x, z [m], contact mode."""
+
+    stamp: float | None = None
+    x: float | None = None
+    z: float | None = None
+    mode: str | None = None
+
+
+@dataclass
+class LogSummary:
+    """Everything ``micro-feeder info`` shows."""
+
+    path: Path
+    files: list[Path]
+    size_bytes: int
+    truncated: list[Path]
+    start_ns: int
+    duration: float
+    topics: list[TopicRow]
+    part: PartState
+    recorder: dict[str, str] = field(default_factory=dict)
+    recorder_source: str = ''  # 'summary', 'diagnostics' or ''
+
+    @property
+    def message_count(self) -> int:
+        return sum(t.count for t in self.topics)
+
+
+def recorder_counters(log: LogReader) -> tuple[dict[str, str], str]:
+    """The recorder's counters and where they came from."""
+    if log.recorder_info:
+        return dict(log.recorder_info), 'summary'
+    counters: dict[str, str] = {}
+    for m in log.messages(['/diagnostics']):
+        for status in m.message.status:
+            if status.name.startswith(RECORDER_STATUS_PREFIX):
+                counters = {kv.key: kv.value for kv in status.values}
+    return counters, 'diagnostics' if counters else ''
+
+
+def summarize(log: LogReader) -> LogSummary:
+    """Summarise an opened log (reads the last pose/contact state and, when needed, the diagnostics)."""
+    duration = log.duration
+    rows = [TopicRow(t.name, t.type, t.count, t.count / duration if duration > 0 else 0.0)
+            for t in sorted(log.topics.values(), key=lambda t: t.name)]
+    part = PartState()
+    pose = log.last('particle/pose')
+    if pose is not None:
+        p = pose.message.pose.position
+        part.stamp, part.x, part.z = pose.publish_time, p.x, p.z
+    state = log.last('particle/contact_state')
+    if state is not None:
+        part.mode = state.message.data
+    counters, source = recorder_counters(log)
+    return LogSummary(log.path, log.files, sum(f.stat().st_size for f in log.files), log.truncated,
+                      log.start_ns, duration, rows, part, counters, source)
+
+
+def _size(n: int) -> str:
+    for unit in ('B', 'KiB', 'MiB', 'GiB'):
+        if n < 1024 or unit == 'GiB':
+            return f'{n:.0f} {unit}' if unit == 'B' else f'{n:.1f} {unit}'
+        n /= 1024
+    return f'{n} B'
+
+
+def _loss_lines(s: LogSummary) -> list[str]:
+    if not s.recorder:
+        return ['loss       unknown (no recorder counters in this log)']
+    c = s.recorder
+    lost, incompatible = int(c.get('lost_total', 0)), int(c.get('incompatible_qos_total', 0))
+    where = 'final summary' if s.recorder_source == 'summary' else 'last recorder diagnostics'
+    verdict = 'none' if lost == 0 and incompatible == 0 else f'{lost} messages lost'
+    lines = [f'loss       {verdict}  (received {int(c.get("received_total", 0)):,}; QoS message-lost events '
+             f'{lost}, incompatible-QoS events {incompatible}; from the {where})']
+    per_topic = {k.split('.', 1)[1]: v for k, v in c.items() if k.startswith('lost.') and v != '0'}
+    lines += [f'           {topic}: {n} lost' for topic, n in sorted(per_topic.items())]
+    return lines
+
+
+def format_summary(s: LogSummary) -> str:
+    """The summary as aligned text for a terminal."""
+    start = datetime.datetime.fromtimestamp(s.start_ns * 1e-9).isoformat(sep=' ', timespec='milliseconds')
+    lines = [
+        f'log        {s.path}',
+        f'files      {len(s.files)} ({_size(s.size_bytes)}, zstd chunks)',
+        f'start      {start} (receive time, local)',
+        f'duration   {s.duration:.3f} s',
+        f'messages   {s.message_count:,}',
+    ]
+    for path in s.truncated:
+        lines.append(f'WARNING    {path.name} is truncated (recorder did not stop cleanly); read up to its '
+                     'last whole chunk. "micro-feeder recover" rewrites it as a complete log.')
+    lines.append('')
+    wname = max([len('topic'), *(len(t.name) for t in s.topics)])
+    wtype = max([len('type'), *(len(t.type) for t in s.topics)])
+    lines.append(f'{"topic":<{wname}}  {"type":<{wtype}}  {"count":>9}  {"rate":>10}')
+    lines += [f'{t.name:<{wname}}  {t.type:<{wtype}}  {t.count:>9,}  {t.rate:>7.1f} Hz' for t in s.topics]
+    lines.append('')
+    p = s.part
+    if p.x is None and p.mode is None:
+        lines.append('part       no particle/pose or particle/contact_state in this log')
+    else:
+        where = (f'x = {p.x * 1e3:.4f} mm, z = {p.z * 1e6:.3f} µm at t = {p.stamp:.4f} s'
+                 if p.x is not None else 'no pose')
+        lines.append(f'part       {where}; mode {p.mode or "unknown"}')
+    lines += _loss_lines(s)
+    return '\n'.join(lines)
