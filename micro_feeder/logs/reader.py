@@ -165,24 +165,13 @@ class LogReader:
                             (end_ns is None or msg.log_time < end_ns):
                         yield self._message(schema, channel, msg)
 
+    def first(self, topic: str) -> LogMessage | None:
+        """The first message (in log time) of ``topic``, None when it has none."""
+        return self._edge(topic, last=False)
+
     def last(self, topic: str) -> LogMessage | None:
         """The last message (in log time) of ``topic``, None when it has none."""
-        name = self.resolve(topic)
-        if name is None:
-            return None
-        for info in reversed(self._index):
-            if not info.counts.get(name):
-                continue
-            if info.complete:
-                with open(info.path, 'rb') as stream:
-                    for schema, channel, msg in make_reader(stream).iter_messages(topics=[name], reverse=True):
-                        return self._message(schema, channel, msg)
-            last = None
-            for last in _iter_stream(info.path, [name]):  # noqa: B007 - keep the last one
-                pass
-            if last is not None:
-                return self._message(*last)
-        return None
+        return self._edge(topic, last=True)
 
     # -- internals ----------------------------------------------------------------------------------
     def _find_files(self) -> list[Path]:
@@ -232,6 +221,25 @@ class LogReader:
             except READ_ERRORS:
                 pass
         return info
+
+    def _edge(self, topic: str, last: bool) -> LogMessage | None:
+        name = self.resolve(topic)
+        if name is None:
+            return None
+        for info in (reversed(self._index) if last else self._index):
+            if not info.counts.get(name):
+                continue
+            if info.complete:
+                with open(info.path, 'rb') as stream:
+                    for record in make_reader(stream).iter_messages(topics=[name], reverse=last):
+                        return self._message(*record)
+            found = None
+            for found in _iter_stream(info.path, [name]):  # noqa: B007 - keep the last one
+                if not last:
+                    break
+            if found is not None:
+                return self._message(*found)
+        return None
 
     def _message(self, schema: Schema, channel: Channel, msg: Message) -> LogMessage:
         decode = self._decoders.get(schema.name)

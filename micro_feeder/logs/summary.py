@@ -17,7 +17,8 @@ RECORDER_STATUS_PREFIX = 'recorder'
 
 @dataclass
 class TopicRow:
-    """One topic of the summary: name, type, count, average rate [Hz] over the log's duration."""
+    """One topic of the summary: name, type, count, average rate [Hz] between its first and last
+    message."""
 
     name: str
     type: str
@@ -67,10 +68,17 @@ def recorder_counters(log: LogReader) -> tuple[dict[str, str], str]:
     return counters, 'diagnostics' if counters else ''
 
 
+def _rate(log: LogReader, topic: str, count: int) -> float:
+    """Messages per second between the first and the last message of a topic."""
+    if count < 2:
+        return 0.0
+    span = (log.last(topic).log_time_ns - log.first(topic).log_time_ns) * 1e-9
+    return (count - 1) / span if span > 0 else 0.0
+
+
 def summarize(log: LogReader) -> LogSummary:
     """Summarise an opened log (reads the last pose/contact state and, when needed, the diagnostics)."""
-    duration = log.duration
-    rows = [TopicRow(t.name, t.type, t.count, t.count / duration if duration > 0 else 0.0)
+    rows = [TopicRow(t.name, t.type, t.count, _rate(log, t.name, t.count))
             for t in sorted(log.topics.values(), key=lambda t: t.name)]
     part = PartState()
     pose = log.last('particle/pose')
@@ -82,7 +90,7 @@ def summarize(log: LogReader) -> LogSummary:
         part.mode = state.message.data
     counters, source = recorder_counters(log)
     return LogSummary(log.path, log.files, sum(f.stat().st_size for f in log.files), log.truncated,
-                      log.start_ns, duration, rows, part, counters, source)
+                      log.start_ns, log.duration, rows, part, counters, source)
 
 
 def _size(n: int) -> str:

@@ -1,0 +1,79 @@
+"""Helpers shared by the recorder and replay nodes: message classes by name, QoS conversions, and the
+main-thread spin loop that stops on SIGINT/SIGTERM.
+
+Why a custom spin loop: ``rclpy.experimental.EventsExecutor`` (needed to keep up with several kHz of
+messages, see ROS_STACK.md) blocks in C++ inside ``spin()`` and never runs Python signal handlers;
+with rclpy's own handlers installed a SIGTERM left it spinning at 100 % CPU. So ``main()`` installs
+plain Python handlers and spins in slices of ``SPIN_SLICE`` seconds, checking a stop flag in between.
+"""
+
+from __future__ import annotations
+
+import importlib
+import signal
+from collections.abc import Callable
+from typing import Any
+
+from rclpy.executors import Executor
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
+
+from ..logs.metadata import qos_profile
+
+SPIN_SLICE = 0.1  # s: longest delay between a signal and the spin loop noticing it
+
+
+def message_class(type_name: str) -> type:
+    """The Python class of ``pkg/msg/Type`` (``pkg/Type`` accepted)."""
+    parts = type_name.split('/')
+    return getattr(importlib.import_module(f'{parts[0]}.msg'), parts[-1])
+
+
+def qos_to_dict(qos: QoSProfile) -> dict[str, Any]:
+    """An rclpy profile as rosbag2's YAML mapping (history, depth, reliability, durability)."""
+    profile = qos_profile(qos.reliability == ReliabilityPolicy.RELIABLE,
+                          qos.durability == DurabilityPolicy.TRANSIENT_LOCAL, max(qos.depth, 1))
+    if qos.history == HistoryPolicy.KEEP_ALL:
+        profile['history'] = 'keep_all'
+    return profile
+
+
+def qos_from_dict(profile: dict[str, Any], default: QoSProfile) -> QoSProfile:
+    """A profile read from a log (``parse_qos`` output) as rclpy QoS; unknown policies from ``default``."""
+    qos = QoSProfile(depth=int(profile.get('depth') or default.depth))
+    qos.history = HistoryPolicy.KEEP_ALL if profile.get('history') == 'keep_all' else HistoryPolicy.KEEP_LAST
+    reliability = {'reliable': ReliabilityPolicy.RELIABLE, 'best_effort': ReliabilityPolicy.BEST_EFFORT}
+    durability = {'volatile': DurabilityPolicy.VOLATILE, 'transient_local': DurabilityPolicy.TRANSIENT_LOCAL}
+    qos.reliability = reliability.get(profile.get('reliability'), default.reliability)
+    qos.durability = durability.get(profile.get('durability'), default.durability)
+    return qos
+
+
+class StopFlag:
+    """Set by SIGINT/SIGTERM (after :meth:`install`) or by :meth:`set`."""
+
+    def __init__(self) -> None:
+        self.signal: int | None = None
+        self.requested = False
+
+    def install(self) -> StopFlag:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, self._handle)
+        return self
+
+    def _handle(self, signum: int, _frame: Any) -> None:
+        self.signal = signum
+        self.requested = True
+
+    def set(self) -> None:
+        self.requested = True
+
+    def __bool__(self) -> bool:
+        return self.requested
+
+
+def spin_until(executor: Executor, done: Callable[[], bool], future: Future | None = None) -> None:
+    """Spin ``executor`` on this thread until ``done()``; ``future`` completing wakes it early."""
+    future = future or Future()
+    while not done():
+        executor.spin_until_future_complete(future, timeout_sec=SPIN_SLICE)
