@@ -11,3 +11,4 @@ os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ['ROS_DOMAIN_ID'] = str(random.SystemRandom().randint(1, 100))
 os.environ['ROS_LOG_DIR'] = tempfile.mkdtemp(prefix='micro-feeder-roslog-')
 os.environ.setdefault('MPLBACKEND', 'Agg')
+pytest_plugins = ['ros_helpers']

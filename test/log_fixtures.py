@@ -1,0 +1,83 @@
+"""Building logs with real CDR bytes (rclpy's serializer) for the logs, recorder and replay tests."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
+from rclpy.serialization import serialize_message
+from rosgraph_msgs.msg import Clock
+from std_msgs.msg import Float64MultiArray, String
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from visualization_msgs.msg import Marker, MarkerArray
+
+from micro_feeder.logs.writer import LogWriter
+
+T0 = 1_700_000_000_000_000_000  # ns: a fixed receive-time origin
+MODES = ('stuck', 'sliding', 'flying')
+
+
+def pose(i: int) -> PoseStamped:
+    m = PoseStamped()
+    m.header.frame_id = 'feeder'
+    m.header.stamp.sec, m.header.stamp.nanosec = divmod(i * 1_000_000, 1_000_000_000)
+    m.pose.position.x, m.pose.position.z = i * 1e-6, (i % 7) * 1e-7
+    return m
+
+
+def one_of_each() -> dict[str, object]:
+    """One message of every type the recorder records by default (non-trivial field values)."""
+    traj = JointTrajectory(joint_names=['piezo_0', 'piezo_1'])
+    # Every sequence filled: rosbags 0.11.9 cannot decode rclpy's CDR of a point whose trailing float64
+    # sequences are empty ('CDR message size mismatch'); mcap-ros2-support can (test_logs checks it).
+    traj.points = [JointTrajectoryPoint(positions=[1e-6, 2e-6], velocities=[0.1, 0.2], accelerations=[0.0, 0.0],
+                                        effort=[0.0, 0.0])]
+    traj.points[0].time_from_start.nanosec = 500
+    twist = TwistStamped()
+    twist.twist.linear.x = 0.25
+    wrench = WrenchStamped()
+    wrench.wrench.force.x, wrench.wrench.force.z = 1e-6, -3e-6
+    markers = MarkerArray(markers=[Marker(ns='micro_feeder', id=3, type=Marker.LINE_STRIP)])
+    diag = DiagnosticArray(status=[DiagnosticStatus(name='sim', values=[KeyValue(key='rtf', value='1.0')])])
+    clock = Clock()
+    clock.clock.sec = 12
+    return {
+        '/actuator/trajectory': traj, '/actuator/command': Float64MultiArray(data=[1.5e-6, -2.0]),
+        '/particle/pose': pose(42), '/particle/twist': twist, '/particle/contact_wrench': wrench,
+        '/particle/contact_state': String(data='sliding'), '/surface/markers': markers,
+        '/clock': clock, '/diagnostics': diag,
+    }
+
+
+def type_name(msg: object) -> str:
+    module = type(msg).__module__.split('.')[0]
+    return f'{module}/msg/{type(msg).__name__}'
+
+
+def write_motion_log(path: Path, n: int = 300, period_ns: int = 1_000_000, **writer_args) -> list[bytes]:
+    """A log of ``n`` poses/twists/wrenches at ``period_ns`` and a mode change every 100; returns the
+    pose bytes in order."""
+    writer = LogWriter(path, **writer_args)
+    writer.add_topic('/particle/pose', 'geometry_msgs/msg/PoseStamped')
+    writer.add_topic('/particle/twist', 'geometry_msgs/msg/TwistStamped')
+    writer.add_topic('/particle/contact_wrench', 'geometry_msgs/msg/WrenchStamped')
+    writer.add_topic('/particle/contact_state', 'std_msgs/msg/String')
+    poses = []
+    for i in range(n):
+        t = T0 + i * period_ns
+        data = serialize_message(pose(i))
+        poses.append(data)
+        writer.write('/particle/pose', data, t)
+        twist = TwistStamped()
+        twist.header.stamp = pose(i).header.stamp
+        twist.twist.linear.x = 1e-3
+        writer.write('/particle/twist', serialize_message(twist), t + 1)
+        wrench = WrenchStamped()
+        wrench.header.stamp = pose(i).header.stamp
+        wrench.wrench.force.x, wrench.wrench.force.z = 1e-7 * i, 2e-6
+        writer.write('/particle/contact_wrench', serialize_message(wrench), t + 2)
+        if i % 100 == 0:
+            writer.write('/particle/contact_state', serialize_message(String(data=MODES[i // 100 % 3])), t + 3)
+    writer.close()
+    return poses
