@@ -1,0 +1,25 @@
+"""``micro-feeder export LOG --csv DIR``: one CSV per topic."""
+
+from __future__ import annotations
+
+import argparse
+
+from ..logs.export import export_csv
+from ._logs import open_log
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser('export', help='export a log to CSV',
+                                   description='Export a log to CSV: one file per topic, one row per message, '
+                                               'one column per field (log_time_ns, publish_time_ns first).')
+    parser.add_argument('log', metavar='LOG', help='log directory or .mcap file')
+    parser.add_argument('--csv', metavar='DIR', required=True, help='directory for the CSV files')
+    parser.add_argument('--topic', action='append', dest='topics', metavar='TOPIC',
+                        help='export only this topic (repeatable; relative names match any namespace)')
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    for path in export_csv(open_log(args.log), args.csv, args.topics):
+        print(path)
+    return 0

@@ -1,0 +1,21 @@
+"""``micro-feeder info LOG``: topics, types, counts, rates, duration, final part state, loss."""
+
+from __future__ import annotations
+
+import argparse
+
+from ..logs.summary import format_summary, summarize
+from ._logs import open_log
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser('info', help='summarise a log',
+                                   description='Summarise a log (rosbag2 directory or .mcap): topics, types, '
+                                               'counts, rates, duration, final part state, recorder loss.')
+    parser.add_argument('log', metavar='LOG', help='log directory or .mcap file')
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    print(format_summary(summarize(open_log(args.log))))
+    return 0

@@ -1,0 +1,23 @@
+"""``micro-feeder plot LOG -o FILE.png``: position, velocity, mode, friction and normal load vs time."""
+
+from __future__ import annotations
+
+import argparse
+
+from ._logs import open_log
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser('plot', help='plot the part motion of a log',
+                                   description='Plot position, velocity, contact mode, friction and normal '
+                                               'load vs time from a log (PNG).')
+    parser.add_argument('log', metavar='LOG', help='log directory or .mcap file')
+    parser.add_argument('-o', '--output', metavar='FILE.png', required=True, help='image to write')
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..logs.plot import plot_log  # matplotlib only when plotting
+
+    print(f'wrote {plot_log(open_log(args.log), args.output)}')
+    return 0
