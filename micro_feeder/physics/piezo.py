@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ._jit import jit
+from ._jit import jit_inline
 from .parameters import ParameterError, ParameterGroup, param
 
 
@@ -40,7 +40,7 @@ class PiezoParams(ParameterGroup):
         return 2.0 * math.pi * self.natural_frequency
 
 
-@jit
+@jit_inline
 def piezo_acceleration(command: float, s: float, sd: float, omega_n: float, damping: float,
                        stroke_min: float, stroke_max: float) -> float:
     """s̈ (m/s²) of the stack at stroke ``s`` (m), velocity ``sd`` (m/s), for a command (m)."""

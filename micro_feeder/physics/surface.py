@@ -12,7 +12,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._jit import jit
+from ._jit import jit_inline
 from .parameters import ParameterError, ParameterGroup, param
 
 
@@ -39,7 +39,7 @@ class SurfaceParams(ParameterGroup):
         return len(self.centers)
 
 
-@jit
+@jit_inline
 def surface_at(x: float, s: np.ndarray, sd: np.ndarray, sdd: np.ndarray, centers: np.ndarray,
                widths: np.ndarray) -> tuple[float, float, float, float, float, float]:
     """(h, h_x, h_xx, h_t, h_tt, h_xt) at position ``x`` (m) for strokes s (m), ṡ (m/s), s̈ (m/s²).

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import CubicSpline
 
-from ._jit import jit
+from ._jit import jit, jit_inline
 from .parameters import ParameterError, ParameterGroup, param
 
 WAVEFORMS = ('raised_cosine', 'sine', 'half_sine', 'trapezoid', 'asymmetric', 'samples')
@@ -155,7 +155,7 @@ def locate_segment(src: tuple, k: int, t: float) -> tuple[int, int]:
     return j, i
 
 
-@jit
+@jit_inline
 def segment_end(src: tuple, k: int, j: int, i: int) -> float:
     """Time (s) at which segment (j, i) of channel ``k`` ends: the next hard breakpoint."""
     start, period, _, _, _, seg_start, _, _ = src
@@ -166,7 +166,7 @@ def segment_end(src: tuple, k: int, j: int, i: int) -> float:
     return start[k] + j * period[k] + seg_start[k, i + 1]
 
 
-@jit
+@jit_inline
 def channel_value(src: tuple, k: int, j: int, i: int, t: float) -> tuple[float, float, float]:
     """(s, ṡ, s̈) of channel ``k`` at ``t`` evaluated on segment (j, i), which may be extrapolated a
     little past its end (a step ending on a breakpoint evaluates its last stage from the left side)."""

@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from .._jit import jit
+from .._jit import jit, jit_inline
 from ..piezo import piezo_acceleration
 from ..surface import surface_at
 from ..waveforms import channel_value, locate_segment, segment_end
@@ -34,8 +34,9 @@ STUCK, SLIDING, FLYING = 0, 1, 2
 
 # prm: scalar parameters
 (P_MASS, P_GRAVITY, P_PULL_OFF, P_DT, P_EVENT_TOL, P_CONVECTIVE, P_INCLUDE_WEIGHT, P_LANDING_RELATIVE,
- P_THRESHOLD, P_PIEZO, P_PIEZO_OMEGA, P_PIEZO_ZETA, P_PIEZO_MIN, P_PIEZO_MAX, P_HAS_BASE, P_RECORD) = range(16)
-N_PRM = 16
+ P_THRESHOLD, P_PIEZO, P_PIEZO_OMEGA, P_PIEZO_ZETA, P_PIEZO_MIN, P_PIEZO_MAX, P_HAS_BASE, P_RECORD,
+ P_ADAPTIVE, P_TOLERANCE, P_CHECK_STEP) = range(19)
+N_PRM = 19
 
 # iv: discrete state. IV_ENTRY_COUNTER: the counter incremented when the current mode was entered (-1
 # none), IV_PREV_MODE: the mode before it; both serve "a mode that ends within the event tolerance of
@@ -45,13 +46,20 @@ N_PRM = 16
 N_IV = 9
 COUNTERS = (IV_STICK_TO_SLIP, IV_SLIP_TO_STICK, IV_TAKE_OFF, IV_LANDING)
 
-# fs: continuous bookkeeping
-FS_T, FS_T_ENTRY, FS_MAX_SPEED = range(3)
-N_FS = 3
+# fs: continuous bookkeeping (FS_H: the adaptive step size to try next)
+FS_T, FS_T_ENTRY, FS_MAX_SPEED, FS_H = range(4)
+N_FS = 4
+N_SCRATCH = 11
+
+# Dormand-Prince 5(4): nodes, 5th-order weights, error weights (b - b*); the stage coefficients are
+# written out in dopri5_step.
+DP_C = (0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0)
+DP_B = (35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84)
+DP_E = (71 / 57600, 0.0, -71 / 16695, 71 / 1920, -17253 / 339200, 22 / 525, -1 / 40)
 
 # aux: quantities of the last evaluation
-(AUX_N, AUX_T_REQ, AUX_QMAX, AUX_L, AUX_H, AUX_HX, AUX_HT, AUX_GAP, AUX_XS) = range(9)
-N_AUX = 9
+(AUX_N, AUX_T_REQ, AUX_QMAX, AUX_L, AUX_H, AUX_HX, AUX_HT, AUX_GAP, AUX_XS, AUX_LOAD_INDEX) = range(10)
+N_AUX = 10
 
 # Columns of a recorded row (then one stroke column per actuator).
 (C_T, C_MODE, C_X, C_Z, C_XD, C_ZD, C_THETA, C_N, C_FRICTION, C_QMAX, C_SEPARATION, C_GAP, C_H,
@@ -67,7 +75,7 @@ DONE, EVENTS_FULL, RECORDS_FULL, NON_FINITE, EVENT_NOT_LOCATED, CHATTER = range(
 STICK_TO_SLIP, SLIP_TO_STICK, TAKE_OFF, LANDING, REVERSAL = range(5)
 
 
-@jit
+@jit_inline
 def interp(xs: np.ndarray, ys: np.ndarray, x: float) -> float:
     """Linear interpolation in a table with increasing ``xs``, extrapolated linearly at both ends."""
     n = xs.size
@@ -75,7 +83,21 @@ def interp(xs: np.ndarray, ys: np.ndarray, x: float) -> float:
     return ys[i] + (x - xs[i]) * (ys[i + 1] - ys[i]) / (xs[i + 1] - xs[i])
 
 
-@jit
+@jit_inline
+def interp_near(xs: np.ndarray, ys: np.ndarray, x: float, aux: np.ndarray, slot: int) -> float:
+    """:func:`interp`, searching from the interval found last time (kept in ``aux[slot]``): the load
+    changes little between evaluations, so this walks 0-2 intervals instead of bisecting the table."""
+    last = xs.size - 2
+    i = min(max(int(aux[slot]), 0), last)
+    while i > 0 and x < xs[i]:
+        i -= 1
+    while i < last and x >= xs[i + 1]:
+        i += 1
+    aux[slot] = i
+    return ys[i] + (x - xs[i]) * (ys[i + 1] - ys[i]) / (xs[i + 1] - xs[i])
+
+
+@jit_inline
 def attraction(gap_m: np.ndarray, attraction_n: np.ndarray, gap: float) -> float:
     """F_att(δ) ≥ 0 (N): table, then the (ε/d)² tail beyond its last gap; δ < 0 reads as 0."""
     last = gap_m.size - 1
@@ -84,7 +106,7 @@ def attraction(gap_m: np.ndarray, attraction_n: np.ndarray, gap: float) -> float
     return interp(gap_m, attraction_n, max(gap, 0.0))
 
 
-@jit
+@jit_inline
 def strokes_at(t: float, y: np.ndarray, model: tuple, src: tuple, cur: np.ndarray,
                st: np.ndarray) -> float:
     """Fill ``st`` (3, channels) with s, ṡ, s̈ at ``t`` on the segments ``cur``; return the base
@@ -108,7 +130,7 @@ def strokes_at(t: float, y: np.ndarray, model: tuple, src: tuple, cur: np.ndarra
     return st[2, n_act] if prm[P_HAS_BASE] != 0.0 else 0.0
 
 
-@jit
+@jit_inline
 def contact_load(x: float, xd: float, st: np.ndarray, base_acc: float, model: tuple,
                  aux: np.ndarray) -> None:
     """Normal load N, required friction T_req and Q_max(N) for a part on the surface at (x, ẋ).
@@ -126,7 +148,7 @@ def contact_load(x: float, xd: float, st: np.ndarray, base_acc: float, model: tu
     n = m * normal_acc / length
     aux[AUX_N] = n
     aux[AUX_T_REQ] = n * hx + m * length * base_acc
-    aux[AUX_QMAX] = interp(load_n, q_max_n, n)
+    aux[AUX_QMAX] = interp_near(load_n, q_max_n, n, aux, AUX_LOAD_INDEX)
     aux[AUX_L] = length
     aux[AUX_H] = h
     aux[AUX_HX] = hx
@@ -154,7 +176,7 @@ def closest_point(x: float, z: float, st: np.ndarray, model: tuple, aux: np.ndar
     aux[AUX_GAP] = ((z - h) - hx * (x - xs)) / length
 
 
-@jit
+@jit_inline
 def evaluate(mode: int, direction: int, t: float, y: np.ndarray, model: tuple, src: tuple,
              cur: np.ndarray, st: np.ndarray, aux: np.ndarray, dy: np.ndarray) -> tuple[float, float]:
     """Right-hand side ``dy`` of mode ``mode`` at (t, y), and the mode's two margins."""
@@ -230,6 +252,52 @@ def rk4_step(mode: int, direction: int, t: float, y: np.ndarray, f0: np.ndarray,
 
 
 @jit
+def dopri5_step(mode: int, direction: int, t: float, y: np.ndarray, f0: np.ndarray, h: float,
+                model: tuple, src: tuple, cur: np.ndarray, st: np.ndarray, aux: np.ndarray,
+                work: np.ndarray, out: np.ndarray) -> None:
+    """The 5th-order Dormand-Prince solution of a step of size ``h`` from (t, y), slope ``f0``, into
+    ``out``; stages k2..k6 are left in ``work[0:5]`` for :func:`dopri5_error`. (Stages written out:
+    looping over the coefficient tuples costs a third of the step.)"""
+    k2, k3, k4, k5, k6, ytmp = work[0], work[1], work[2], work[3], work[4], work[5]
+    n = y.size
+    for i in range(n):
+        ytmp[i] = y[i] + h * (1 / 5) * f0[i]
+    evaluate(mode, direction, t + DP_C[1] * h, ytmp, model, src, cur, st, aux, k2)
+    for i in range(n):
+        ytmp[i] = y[i] + h * (3 / 40 * f0[i] + 9 / 40 * k2[i])
+    evaluate(mode, direction, t + DP_C[2] * h, ytmp, model, src, cur, st, aux, k3)
+    for i in range(n):
+        ytmp[i] = y[i] + h * (44 / 45 * f0[i] - 56 / 15 * k2[i] + 32 / 9 * k3[i])
+    evaluate(mode, direction, t + DP_C[3] * h, ytmp, model, src, cur, st, aux, k4)
+    for i in range(n):
+        ytmp[i] = y[i] + h * (19372 / 6561 * f0[i] - 25360 / 2187 * k2[i] + 64448 / 6561 * k3[i]
+                              - 212 / 729 * k4[i])
+    evaluate(mode, direction, t + DP_C[4] * h, ytmp, model, src, cur, st, aux, k5)
+    for i in range(n):
+        ytmp[i] = y[i] + h * (9017 / 3168 * f0[i] - 355 / 33 * k2[i] + 46732 / 5247 * k3[i]
+                              + 49 / 176 * k4[i] - 5103 / 18656 * k5[i])
+    evaluate(mode, direction, t + h, ytmp, model, src, cur, st, aux, k6)
+    for i in range(n):
+        out[i] = y[i] + h * (DP_B[0] * f0[i] + DP_B[2] * k3[i] + DP_B[3] * k4[i] + DP_B[4] * k5[i]
+                             + DP_B[5] * k6[i])
+
+
+@jit
+def dopri5_error(h: float, f0: np.ndarray, work: np.ndarray, f1: np.ndarray, tolerance: float,
+                 max_step: float) -> float:
+    """Embedded error estimate of the last :func:`dopri5_step` (slope ``f1`` at its end), as a multiple
+    of the allowed error: ``tolerance`` (m) on positions, ``tolerance / max_step`` (m/s) on velocities
+    (even / odd state entries). ≤ 1 accepts the step."""
+    worst = 0.0
+    for i in range(f0.size):
+        acc = (DP_E[0] * f0[i] + DP_E[2] * work[1, i] + DP_E[3] * work[2, i] + DP_E[4] * work[3, i]
+               + DP_E[5] * work[4, i] + DP_E[6] * f1[i])
+        scale = tolerance if i % 2 == 0 else tolerance / max_step
+        worst = max(worst, abs(h * acc) / scale)
+    return worst
+
+
+@jit_inline
 def hermite(theta: float, h: float, y0: np.ndarray, f0: np.ndarray, y1: np.ndarray, f1: np.ndarray,
             out: np.ndarray) -> None:
     """Cubic Hermite interpolant of a step at fraction ``theta`` (dense output, 4th-order accurate)."""
@@ -255,7 +323,7 @@ def locate_root(which: int, mode: int, direction: int, t: float, h: float, y0: n
     a, b = 0.0, 1.0
     ga, gb = g_start, g_end
     side = 0
-    yi, dy = work[4], work[5]
+    yi, dy = work[9], work[10]
     for it in range(200):
         if b - a <= tol:
             return b
@@ -300,14 +368,14 @@ def enter(iv: np.ndarray, fs: np.ndarray, t: float, new_mode: int, counter: int,
     fs[FS_T_ENTRY] = t
 
 
-@jit
+@jit_inline
 def copy_into(target: np.ndarray, values: np.ndarray) -> None:
     """target[:] = values, element by element (a slice assignment may allocate a temporary)."""
     for i in range(values.size):
         target[i] = values[i]
 
 
-@jit
+@jit_inline
 def finite(values: np.ndarray) -> bool:
     """True when every entry is finite (an explicit loop: numba compiles no generator expressions)."""
     for v in values:  # noqa: SIM110
@@ -316,7 +384,7 @@ def finite(values: np.ndarray) -> bool:
     return True
 
 
-@jit
+@jit_inline
 def sign(value: float) -> int:
     """+1, -1 or 0."""
     return 1 if value > 0.0 else (-1 if value < 0.0 else 0)
@@ -441,17 +509,20 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
     events, rows used). A status other than DONE stops at a consistent state: EVENTS_FULL /
     RECORDS_FULL ask the caller to drain the buffers and call again; NON_FINITE, EVENT_NOT_LOCATED
     and CHATTER are errors (the state is left at the last good step). Work arrays (the kernel never
-    allocates): ``scratch`` (9, y.size), ``st`` (3, channels), ``aux`` (N_AUX,), ``cur`` (channels, 2)
+    allocates): ``scratch`` (N_SCRATCH, y.size), ``st`` (3, channels), ``aux`` (N_AUX,), ``cur`` (channels, 2)
     int64.
     """
     prm = model[0]
-    work = scratch[:6]
+    work = scratch
     f0 = scratch[6]
     f1 = scratch[7]
     y1 = scratch[8]
     dt = prm[P_DT]
     tol = prm[P_EVENT_TOL]
     threshold = prm[P_THRESHOLD] != 0.0
+    adaptive = prm[P_ADAPTIVE] != 0.0 and not threshold
+    if fs[FS_H] <= 0.0:
+        fs[FS_H] = dt
     record = prm[P_RECORD] != 0.0
     status = DONE
     n_ev = 0
@@ -487,10 +558,22 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
             elif iv[IV_FRESH] == 0 and (g0 < 0.0 if mode == STUCK else g0 <= 0.0):
                 which = 0
         if which < 0:
-            h = min(dt, t_next - t, t_target - t)
             direction = iv[IV_DIR]
-            rk4_step(mode, direction, t, y, f0, h, model, src, cur, st, aux, work, y1)
-            e0, e1 = evaluate(mode, direction, t + h, y1, model, src, cur, st, aux, f1)
+            moving = mode != STUCK or prm[P_PIEZO] != 0.0
+            if adaptive and moving:             # Dormand-Prince with error control
+                h = min(fs[FS_H], dt, t_next - t, t_target - t)
+                while True:
+                    dopri5_step(mode, direction, t, y, f0, h, model, src, cur, st, aux, work, y1)
+                    e0, e1 = evaluate(mode, direction, t + h, y1, model, src, cur, st, aux, f1)
+                    err = dopri5_error(h, f0, work, f1, prm[P_TOLERANCE], dt)
+                    if err <= 1.0 or not math.isfinite(err) or h < 1e-14:
+                        break
+                    h *= max(0.2, 0.9 * err ** -0.2)
+                fs[FS_H] = h * min(5.0, max(0.2, 0.9 * max(err, 1e-10) ** -0.2))
+            else:
+                h = min(dt if moving else prm[P_CHECK_STEP], t_next - t, t_target - t)
+                rk4_step(mode, direction, t, y, f0, h, model, src, cur, st, aux, work, y1)
+                e0, e1 = evaluate(mode, direction, t + h, y1, model, src, cur, st, aux, f1)
             if not finite(y1) or math.isnan(e0) or math.isnan(e1):
                 status = NON_FINITE
                 break
@@ -506,7 +589,7 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
                 iv[IV_FRESH] = 0
                 fs[FS_MAX_SPEED] = max(fs[FS_MAX_SPEED], abs(y[1]))
                 if record:
-                    observe(t, y, iv, model, src, cur, st, aux, work[5], rec[n_rec])
+                    observe(t, y, iv, model, src, cur, st, aux, work[10], rec[n_rec])
                     n_rec += 1
                 need_eval = t >= t_next or (threshold and mode != FLYING)
                 continue
@@ -523,7 +606,10 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
             if theta < 0.0:
                 status = EVENT_NOT_LOCATED
                 break
-            rk4_step(mode, direction, t, y, f0, theta * h, model, src, cur, st, aux, work, y1)
+            if adaptive and moving:
+                dopri5_step(mode, direction, t, y, f0, theta * h, model, src, cur, st, aux, work, y1)
+            else:
+                rk4_step(mode, direction, t, y, f0, theta * h, model, src, cur, st, aux, work, y1)
             t += theta * h
             copy_into(y, y1)
             fs[FS_MAX_SPEED] = max(fs[FS_MAX_SPEED], abs(y[1]))
@@ -541,7 +627,7 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
         ev_f[n_ev, 0], ev_f[n_ev, 1] = t, y[0]
         n_ev += 1
         if record:
-            observe(t, y, iv, model, src, cur, st, aux, work[5], rec[n_rec])
+            observe(t, y, iv, model, src, cur, st, aux, work[10], rec[n_rec])
             n_rec += 1
         need_eval = True
     fs[FS_T] = t

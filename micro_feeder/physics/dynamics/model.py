@@ -211,6 +211,9 @@ class FeederModel:
         prm[k.P_PIEZO_MIN] = self.piezo.stroke_min
         prm[k.P_PIEZO_MAX] = self.piezo.stroke_max
         prm[k.P_HAS_BASE] = self.base_acceleration is not None
+        prm[k.P_ADAPTIVE] = self.integration.method == 'dopri5'
+        prm[k.P_TOLERANCE] = self.integration.tolerance
+        prm[k.P_CHECK_STEP] = self.integration.check_step
         packed = (prm, np.asarray(self.surface.centers, dtype=float),
                   np.asarray(self.surface.widths, dtype=float),
                   *(np.ascontiguousarray(getattr(tables, name), dtype=float)
@@ -343,7 +346,7 @@ class FeederModel:
         rec = np.zeros((4096 if record else 2, k.N_FIXED_COLUMNS + self.n_actuators))
         events: list[Event] = []
         recorded: list[np.ndarray] = []
-        scratch = np.zeros((9, state.y.size))
+        scratch = np.zeros((k.N_SCRATCH, state.y.size))
         aux = np.zeros(k.N_AUX)
         for t_until, src in self._segments(state.t, t_target, source):
             st = np.zeros((3, src[0].size))

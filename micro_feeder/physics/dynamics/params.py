@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from ..parameters import ParameterGroup, param
 
 FRICTION_LOGICS = ('events', 'threshold')
+METHODS = ('dopri5', 'rk4')
 LANDING_VELOCITIES = ('relative', 'absolute')
 
 
@@ -16,9 +17,14 @@ class IntegrationParams(ParameterGroup):
 
     prefix = 'integration'
 
-    dt: float = param(2e-6, 'Runge-Kutta (RK4) step, also the sampling step of the event checks while '
-                      'stuck; the default keeps distance per stroke within 0.1 % of the dt -> 0 limit '
-                      '(docs/dynamics.md)', 's', gt=0, le=1e-3)
+    method: str = param('dopri5', "'dopri5': adaptive Dormand-Prince 5(4); 'rk4': fixed-step classical "
+                        "RK4 (the seed's scheme; always used by friction_logic threshold)", choices=METHODS)
+    dt: float = param(1e-4, 'rk4: the step; dopri5: the largest step', 's', gt=0, le=1e-3)
+    tolerance: float = param(1e-10, 'dopri5: error allowed per step on positions (m); on velocities '
+                             'tolerance / dt (m/s)', 'm', gt=0)
+    check_step: float = param(5e-5, 'sampling step of the stick-limit and pull-off checks while stuck '
+                              '(nothing is integrated then); a dip shorter than this can be missed',
+                              's', gt=0, le=1e-3)
     event_tolerance: float = param(1e-9, 'time tolerance of event location', 's', gt=0, le=1e-6)
     friction_logic: str = param('events', "'events': exact stick/slip switching by event location; "
                                 "'threshold': the seed's threshold-velocity logic V_th = Q_max dt / m",
