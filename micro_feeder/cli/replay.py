@@ -1,0 +1,32 @@
+"""``micro-feeder replay LOG``: run the replay node on a log."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser('replay', help='publish a log on its topics at recorded timing',
+                                   description='Publish a log\'s messages on their topics at their recorded '
+                                               'timing × RATE (the replay node; Ctrl-C stops).')
+    parser.add_argument('log', metavar='LOG', help='log directory or .mcap file')
+    parser.add_argument('--rate', type=float, default=1.0, help='playback speed factor (default 1)')
+    parser.add_argument('--loop', action='store_true', help='start again after the end')
+    parser.add_argument('--start-offset', type=float, default=0.0, metavar='S', help='skip S seconds')
+    parser.add_argument('--topic', action='append', dest='topics', default=[], metavar='TOPIC',
+                        help='replay only this topic (repeatable)')
+    parser.add_argument('--remap', action='append', default=[], metavar='FROM:=TO', help='rename a topic')
+    parser.add_argument('--clock', action='store_true', help='publish the playback time on /clock')
+    parser.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..nodes.replay import main as replay_main  # rclpy only when replaying
+
+    def strings(values: list[str]) -> str:
+        return '[' + ','.join(f'"{v}"' for v in values) + ']' if values else '[""]'
+
+    return replay_main(['replay', '--ros-args', '-p', f'log:={args.log}', '-p', f'rate:={args.rate}',
+                        '-p', f'loop:={str(args.loop).lower()}', '-p', f'start_offset:={args.start_offset}',
+                        '-p', f'topics:={strings(args.topics)}', '-p', f'remap:={strings(args.remap)}',
+                        '-p', f'publish_clock:={str(args.clock).lower()}'])

@@ -1,0 +1,192 @@
+"""The replay node: publishes a log's messages on their topics at their recorded timing × ``rate``.
+
+Messages are published as recorded CDR bytes (no decode), each with the QoS its publisher offered when
+the log stored it (``offered_qos_profiles``; reliable, volatile, depth 100 otherwise). A player thread
+sleeps until each message's due time (coarse sleep, then a short busy wait) and records its own timing
+error: actual publish time minus due time [s]. The executor, on the main thread, serves
+``replay/pause`` (std_srvs/SetBool) and the optional ``/clock`` (playback log time) timer.
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+import time
+
+import numpy as np
+import rclpy
+from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, ParameterType
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rclpy.signals import SignalHandlerOptions
+from rclpy.task import Future
+from rosgraph_msgs.msg import Clock
+from std_srvs.srv import SetBool
+
+from ..logs.metadata import parse_qos
+from ..logs.reader import LogReader
+from ._ros import StopFlag, message_class, qos_from_dict, spin_until
+
+DEFAULT_QOS = QoSProfile(depth=100)
+BUSY_WAIT = 0.002  # s: last stretch before a due time spent polling the clock instead of sleeping
+
+
+def _descriptor(description: str, type_: int, float_range: tuple[float, float] | None = None
+                ) -> ParameterDescriptor:
+    d = ParameterDescriptor(description=description, type=type_, read_only=True)
+    if float_range:
+        d.floating_point_range = [FloatingPointRange(from_value=float_range[0], to_value=float_range[1])]
+    return d
+
+
+class Replay(Node):
+    """Replays a log; ``finished`` completes after the last message (never with ``loop``)."""
+
+    def __init__(self, *, context: Context | None = None, cli_args: list[str] | None = None,
+                 parameter_overrides: list | None = None) -> None:
+        super().__init__('replay', context=context, cli_args=cli_args,
+                         parameter_overrides=parameter_overrides or [])
+        s, d, b, a = (ParameterType.PARAMETER_STRING, ParameterType.PARAMETER_DOUBLE,
+                      ParameterType.PARAMETER_BOOL, ParameterType.PARAMETER_STRING_ARRAY)
+        self.declare_parameter('log', '', _descriptor('log directory or .mcap file to replay', s))
+        self.declare_parameter('rate', 1.0, _descriptor('playback speed factor', d, (0.01, 100.0)))
+        self.declare_parameter('loop', False, _descriptor('start again at start_offset after the end', b))
+        self.declare_parameter('start_offset', 0.0, _descriptor('skip this long [s] from the log start', d,
+                                                                (0.0, 1e9)))
+        self.declare_parameter('topics', [''], _descriptor('topics to replay; empty = all', a))
+        self.declare_parameter('remap', [''], _descriptor('topic renames, FROM:=TO (recorded names)', a))
+        self.declare_parameter('publish_clock', False, _descriptor(
+            'publish the playback log time on /clock (the recorded /clock is then not replayed)', b))
+        self.declare_parameter('clock_frequency', 100.0, _descriptor('/clock rate [Hz]', d, (1.0, 1000.0)))
+        p = {n: self.get_parameter(n).value for n in
+             ('log', 'rate', 'loop', 'start_offset', 'topics', 'remap', 'publish_clock', 'clock_frequency')}
+        if not p['log']:
+            raise ValueError('parameter "log" is required (the log to replay)')
+        self.log = LogReader(p['log'])
+        self.rate, self.loop = p['rate'], p['loop']
+        self.start_ns = self.log.start_ns + int(p['start_offset'] * 1e9)
+        wanted = [t for t in p['topics'] if t]
+        names = [r for r in map(self.log.resolve, wanted) if r] if wanted else list(self.log.topics)
+        if p['publish_clock']:
+            names = [n for n in names if n != '/clock']
+        remap = dict(r.split(':=', 1) for r in p['remap'] if r)
+        self.topics = names
+        self._outputs = {}
+        for name in names:
+            topic = self.log.topics[name]
+            offered = parse_qos(topic.metadata.get('offered_qos_profiles', ''))
+            qos = qos_from_dict(offered[0], DEFAULT_QOS) if offered else DEFAULT_QOS
+            self._outputs[name] = self.create_publisher(message_class(topic.type), remap.get(name, name), qos)
+        self.timing_errors: list[float] = []
+        self.published = 0
+        self.finished = Future()
+        self.playback_ns = self.start_ns
+        self._paused_since: float | None = None
+        self._pause_shift = 0.0
+        self._stop = threading.Event()
+        self._lock = threading.Lock()
+        self.create_service(SetBool, 'replay/pause', self._on_pause)
+        if p['publish_clock']:
+            self._clock = self.create_publisher(Clock, '/clock', 10)
+            self.create_timer(1.0 / p['clock_frequency'], self._publish_clock)
+        self._thread = threading.Thread(target=self._play, name='replay-player', daemon=True)
+
+    def start(self) -> None:
+        """Start playing (publishers should be matched first if nothing may be missed)."""
+        self._thread.start()
+
+    def _play(self) -> None:
+        while not self._stop.is_set():
+            origin = time.monotonic()
+            with self._lock:
+                self._pause_shift = 0.0
+            for m in self.log.messages(self.topics, start_ns=self.start_ns):
+                due = origin + (m.log_time_ns - self.start_ns) * 1e-9 / self.rate
+                if not self._wait_until(due):
+                    return
+                self._outputs[m.topic].publish(m.data)
+                self.timing_errors.append(time.monotonic() - due - self._pause_shift)
+                self.playback_ns = m.log_time_ns
+                self.published += 1
+            if not self.loop:
+                break
+        self.finished.set_result(True)
+
+    def _wait_until(self, due: float) -> bool:
+        """Sleep until ``due`` (+ time spent paused); False when stopped."""
+        while True:
+            if self._stop.is_set():
+                return False
+            with self._lock:
+                paused = self._paused_since is not None
+                target = due + self._pause_shift
+            left = target - time.monotonic()
+            if paused:
+                self._stop.wait(0.01)
+            elif left > BUSY_WAIT:
+                self._stop.wait(left - BUSY_WAIT)
+            elif left > 0:
+                continue
+            else:
+                return True
+
+    def _on_pause(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
+        with self._lock:
+            now = time.monotonic()
+            if request.data and self._paused_since is None:
+                self._paused_since = now
+            elif not request.data and self._paused_since is not None:
+                self._pause_shift += now - self._paused_since
+                self._paused_since = None
+        response.success = True
+        response.message = 'paused' if request.data else 'playing'
+        return response
+
+    def _publish_clock(self) -> None:
+        msg = Clock()
+        msg.clock.sec, msg.clock.nanosec = divmod(self.playback_ns, 1_000_000_000)
+        self._clock.publish(msg)
+
+    def timing_report(self) -> str:
+        """p50/p99/max of the publish timing error [ms]."""
+        if not self.timing_errors:
+            return 'no message published'
+        e = np.asarray(self.timing_errors) * 1e3
+        return (f'{len(e)} messages, timing error p50 {np.percentile(e, 50):.3f} ms, '
+                f'p99 {np.percentile(e, 99):.3f} ms, max {e.max():.3f} ms')
+
+    def close(self) -> None:
+        """Stop the player thread."""
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join()
+
+
+def main(args: list[str] | None = None) -> int:
+    """Console script ``replay``: ``replay --ros-args -p log:=out/run1 -p rate:=2.0``."""
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
+    stop = StopFlag().install()
+    try:
+        node = Replay()
+    except (ValueError, FileNotFoundError) as err:
+        print(f'replay: error: {err}', file=sys.stderr)
+        rclpy.shutdown()
+        return 2
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    node.start()
+    try:
+        spin_until(executor, lambda: bool(stop) or node.finished.done(), node.finished)
+    finally:
+        node.close()
+        print(f'replay: {node.timing_report()}')
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
