@@ -19,7 +19,7 @@ from micro_feeder.nodes.replay import Replay
 N = 300  # messages per topic, 1 ms apart: 0.3 s of log
 
 
-def run_replay(context, log_path, overrides, topic='/particle/pose', pause_for=0.0):
+def run_replay(context, log_path, overrides, topic='/particle/pose', pause_for=0.0, expect=N):
     listener = rclpy.create_node('listener', context=context)
     got: list[tuple[float, bytes]] = []
     listener.create_subscription(PoseStamped, topic, lambda data: got.append((time.monotonic(), data)), 1000,
@@ -40,12 +40,11 @@ def run_replay(context, log_path, overrides, topic='/particle/pose', pause_for=0
             held = replay.published
             deadline = time.monotonic() + pause_for
             wait_until(lambda: time.monotonic() > deadline, pause_for + 1, executor=executor)
-            assert replay.published == held
+            assert replay.published <= held + 1  # at most the one already due when the pause came
             f = pause.call_async(SetBool.Request(data=False))
             wait_until(f.done, 5, executor=executor, what='resumed')
         wait_until(replay.finished.done, 10, executor=executor, what='replay finished')
-        wait_until(lambda: len(got) >= replay.published // (4 if topic == '/particle/pose' else 1), 5,
-                   executor=executor, what='messages delivered')
+        wait_until(lambda: len(got) >= expect, 5, executor=executor, what='messages delivered')
     finally:
         replay.close()
         executor.shutdown()
