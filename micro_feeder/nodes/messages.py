@@ -1,0 +1,115 @@
+"""Building the simulator's messages from a physics :class:`Observation` (pure functions, no node).
+
+Frames (DYNAMICS.md §1, REP 103): ``feeder`` has x along the feeder, z up, y to the left; ``contact`` sits
+at the part with x along the surface tangent and z along its normal, tilted by θ = atan(h_x) about y.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+from builtin_interfaces.msg import Duration, Time
+from geometry_msgs.msg import Point, PoseStamped, TwistStamped, WrenchStamped
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from visualization_msgs.msg import Marker, MarkerArray
+
+from ..physics.dynamics import Observation
+from ..physics.surface import surface_profile
+
+FEEDER_FRAME = 'feeder'
+CONTACT_FRAME = 'contact'
+
+
+def to_time(t: float) -> Time:
+    """Sim time ``t`` (s, >= 0) as a ROS Time, rounded to the nanosecond."""
+    ns = round(t * 1e9)
+    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def to_duration(t: float) -> Duration:
+    """A duration ``t`` (s, >= 0) as a ROS Duration, rounded to the nanosecond."""
+    ns = round(t * 1e9)
+    return Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+
+
+def tilt_quaternion(theta: float) -> tuple[float, float, float, float]:
+    """(x, y, z, w) of the contact frame's orientation in ``feeder``: a rotation by −θ about y, so that the
+    contact x axis (cos θ, 0, sin θ) points up the slope when h_x = tan θ > 0."""
+    return 0.0, math.sin(-theta / 2.0), 0.0, math.cos(-theta / 2.0)
+
+
+def pose(obs: Observation, stamp: Time) -> PoseStamped:
+    """The part's position (x, 0, z) (m) in ``feeder`` with the contact-frame tilt as orientation."""
+    msg = PoseStamped(header=Header(stamp=stamp, frame_id=FEEDER_FRAME))
+    msg.pose.position.x, msg.pose.position.z = obs.x, obs.z
+    q = msg.pose.orientation
+    q.x, q.y, q.z, q.w = tilt_quaternion(obs.theta)
+    return msg
+
+
+def twist(obs: Observation, stamp: Time) -> TwistStamped:
+    """The part's velocity (ẋ, 0, ż) (m/s) in ``feeder``; angular velocity 0 (a point mass)."""
+    msg = TwistStamped(header=Header(stamp=stamp, frame_id=FEEDER_FRAME))
+    msg.twist.linear.x, msg.twist.linear.z = obs.xdot, obs.zdot
+    return msg
+
+
+def contact_wrench(obs: Observation, stamp: Time) -> WrenchStamped:
+    """Force on the part from the surface in ``contact``: x = friction T (N), z = normal load N (N; > 0
+    presses, < 0 adhesion holding; in flight −F_att, the attraction). Torque 0."""
+    msg = WrenchStamped(header=Header(stamp=stamp, frame_id=CONTACT_FRAME))
+    msg.wrench.force.x, msg.wrench.force.z = obs.friction, obs.normal_load
+    return msg
+
+
+def joint_state(names: Sequence[str], positions: np.ndarray, velocities: np.ndarray, stamp: Time) -> JointState:
+    """Actual strokes (m) and stroke velocities (m/s) per actuator."""
+    return JointState(header=Header(stamp=stamp, frame_id=FEEDER_FRAME), name=list(names),
+                      position=[float(v) for v in positions], velocity=[float(v) for v in velocities])
+
+
+def clock(stamp: Time) -> Clock:
+    return Clock(clock=stamp)
+
+
+def surface_markers(obs: Observation, xs: np.ndarray, centers: Sequence[float], widths: Sequence[float],
+                    part_size: float, stamp: Time) -> MarkerArray:
+    """The deformed surface as a LINE_STRIP over ``xs`` (m) and the part as a sphere of ``part_size`` (m),
+    in ``feeder`` (namespace ``micro_feeder``, ids 0 and 1, replaced in place every time)."""
+    heights = surface_profile(xs, obs.strokes, centers, widths)
+    header = Header(stamp=stamp, frame_id=FEEDER_FRAME)
+    line = Marker(header=header, ns='micro_feeder', id=0, type=Marker.LINE_STRIP, action=Marker.ADD)
+    line.pose.orientation.w = 1.0
+    line.scale.x = part_size / 10.0
+    line.color.r, line.color.g, line.color.b, line.color.a = 0.6, 0.6, 0.7, 1.0
+    line.points = [_point(x, z) for x, z in zip(xs.tolist(), heights.tolist(), strict=True)]
+    part = Marker(header=header, ns='micro_feeder', id=1, type=Marker.SPHERE, action=Marker.ADD)
+    part.pose.position.x, part.pose.position.z = obs.x, obs.z + part_size / 2.0
+    part.pose.orientation.w = 1.0
+    part.scale.x = part.scale.y = part.scale.z = part_size
+    part.color.r, part.color.g, part.color.b, part.color.a = _mode_color(obs.mode)
+    return MarkerArray(markers=[line, part])
+
+
+def _point(x: float, z: float) -> Point:
+    return Point(x=x, y=0.0, z=z)
+
+
+def _mode_color(mode: str) -> tuple[float, float, float, float]:
+    return {'stuck': (0.2, 0.7, 0.2, 1.0), 'sliding': (0.9, 0.6, 0.1, 1.0)}.get(mode, (0.9, 0.2, 0.2, 1.0))
+
+
+def trajectory(names: Sequence[str], offsets: np.ndarray, positions: np.ndarray, velocities: np.ndarray,
+               accelerations: np.ndarray, stamp: Time) -> JointTrajectory:
+    """A JointTrajectory: knots at ``offsets`` (s from the stamp) with (n, joints) positions (m),
+    velocities (m/s), accelerations (m/s²)."""
+    points = [JointTrajectoryPoint(positions=positions[i].tolist(), velocities=velocities[i].tolist(),
+                                   accelerations=accelerations[i].tolist(),
+                                   time_from_start=to_duration(float(offsets[i])))
+              for i in range(len(offsets))]
+    return JointTrajectory(header=Header(stamp=stamp), joint_names=list(names), points=points)

@@ -1,0 +1,322 @@
+"""The ``simulator`` node: the real-time loop of DESIGN.md §4 around the physics stepper.
+
+A wall-clock timer at ``publish_rate`` advances sim time by elapsed wall time × ``real_time_factor``
+(0: as fast as possible, ``step_period`` per step), never more than two timer periods' worth per tick
+(a late tick slows sim time instead of building up a debt), then publishes the state on the topics of
+docs/interface.md. Commands on ``actuator/trajectory`` / ``actuator/command`` are checked
+(:mod:`.commands`) and applied by their stamps in sim time, so a paused run advanced with
+``simulator/step`` is repeatable bit for bit. Model parameters can be set at any time and are applied
+on ``simulator/reset``; ``real_time_factor`` and ``step_period`` apply at once.
+"""
+
+from __future__ import annotations
+
+import collections
+import time
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock as ClockMsg
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray, Header, String
+from std_srvs.srv import SetBool, Trigger
+from trajectory_msgs.msg import JointTrajectory
+from visualization_msgs.msg import MarkerArray
+
+from ..logs.topics import TOPICS_BY_NAME
+from ..physics.dynamics import Event, SimulationError
+from ..physics.parameters import ParameterError, ParamSpec
+from . import messages
+from .commands import CommandRejected, joint_names, parse_setpoints, parse_trajectory
+from .parameters import check_changes, declare, model_specs, values
+from .spin import spin_node
+from .stepper import Stepper, build_model
+
+NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
+    'publish_rate': (ParamSpec('rate of the loop timer and of the state topics', 'Hz', gt=0, le=10000,
+                               read_only=True), 1000.0),
+    'real_time_factor': (ParamSpec('sim seconds per wall second; 0 = as fast as possible', '', ge=0, le=1000),
+                         1.0),
+    'start_paused': (ParamSpec('start paused: advance with simulator/step, run with simulator/pause false',
+                               kind='bool', read_only=True), False),
+    'publish_clock': (ParamSpec('publish sim time on /clock', kind='bool', read_only=True), True),
+    'step_period': (ParamSpec('sim time advanced by one simulator/step call, and per step when '
+                              'real_time_factor is 0', 's', gt=0, le=1.0), 1e-3),
+    'markers_rate': (ParamSpec('rate of surface/markers (wall clock)', 'Hz', gt=0, le=1000, read_only=True),
+                     30.0),
+}
+
+
+
+def topic_qos(name: str) -> QoSProfile:
+    """The QoS of a topic of DESIGN.md §3, from the table the recorder shares (logs/topics.py)."""
+    spec = TOPICS_BY_NAME[name]
+    reliability = ReliabilityPolicy.RELIABLE if spec.reliable else ReliabilityPolicy.BEST_EFFORT
+    durability = DurabilityPolicy.TRANSIENT_LOCAL if spec.transient_local else DurabilityPolicy.VOLATILE
+    return QoSProfile(depth=spec.depth, reliability=reliability, durability=durability)
+
+
+PART_SIZE = 100e-6     # marker diameter of the part (m)
+MARKER_POINTS = 200    # points of the surface line strip
+
+
+class Simulator(Node):
+    """Feeder simulator: see the module docstring and docs/interface.md.
+
+    ``overrides``: parameter values that win over ``--ros-args`` and the defaults (used by
+    ``micro-feeder run --params/--set``). Raises :class:`ParameterError` for a refused value.
+    """
+
+    def __init__(self, overrides: Mapping[str, Any] | None = None, **kwargs: Any):
+        super().__init__('simulator', **kwargs)
+        self._model_specs = model_specs()
+        self._specs = {**self._model_specs, **NODE_SPECS}
+        declare(self, self._specs, overrides)
+        self._stepper = Stepper(build_model(values(self, self._model_specs)))
+        self._model_pending = False
+        p = values(self, NODE_SPECS)
+        self._rtf: float = p['real_time_factor']
+        self._step_period: float = p['step_period']
+        self._period = 1.0 / p['publish_rate']
+        self._publish_clock: bool = p['publish_clock']
+        self._paused: bool = p['start_paused']
+        self._markers_period = 1.0 / p['markers_rate']
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+        self._pub_pose = self._publisher(PoseStamped, 'particle/pose')
+        self._pub_twist = self._publisher(TwistStamped, 'particle/twist')
+        self._pub_wrench = self._publisher(WrenchStamped, 'particle/contact_wrench')
+        self._pub_joints = self._publisher(JointState, 'actuator/joint_states')
+        self._pub_mode = self._publisher(String, 'particle/contact_state')
+        self._pub_markers = self._publisher(MarkerArray, 'surface/markers')
+        self._pub_clock = self._publisher(ClockMsg, '/clock') if self._publish_clock else None
+        self._pub_diag = self._publisher(DiagnosticArray, '/diagnostics')
+        self.create_subscription(JointTrajectory, 'actuator/trajectory', self._on_trajectory,
+                                 topic_qos('actuator/trajectory'))
+        self.create_subscription(Float64MultiArray, 'actuator/command', self._on_command,
+                                 topic_qos('actuator/command'))
+        self.create_service(Trigger, 'simulator/reset', self._on_reset)
+        self.create_service(SetBool, 'simulator/pause', self._on_pause)
+        self.create_service(Trigger, 'simulator/step', self._on_step)
+
+        self.rejected = 0
+        self.last_rejection = ''
+        self.overruns = 0
+        self.error = ''
+        self._mode = ''
+        self._tick_periods: collections.deque[float] = collections.deque(maxlen=4000)
+        self._tick_busy: collections.deque[float] = collections.deque(maxlen=4000)
+        steady = Clock(clock_type=ClockType.STEADY_TIME)
+        self._last_tick = time.perf_counter()
+        self._last_markers = -float('inf')
+        self._window = (time.perf_counter(), self._stepper.t)
+        self.achieved_rtf = 0.0
+        self._configure_surface_points()
+        self._publish_state([])
+        self.create_timer(self._period, self._tick, clock=steady)
+        self.create_timer(1.0, self._publish_diagnostics, clock=steady)
+
+    def _publisher(self, msg_type: type, topic: str) -> Any:
+        return self.create_publisher(msg_type, topic, topic_qos(topic))
+
+    # -- public, for micro-feeder run and tests -----------------------------------------------------
+
+    @property
+    def stepper(self) -> Stepper:
+        return self._stepper
+
+    @property
+    def paused(self) -> bool:
+        return self._paused
+
+    @property
+    def joints(self) -> list[str]:
+        return joint_names(self._stepper.model.n_actuators)
+
+    # -- loop ---------------------------------------------------------------------------------------
+
+    def _tick(self) -> None:
+        start = time.perf_counter()
+        self._tick_periods.append(start - self._last_tick)
+        elapsed, self._last_tick = start - self._last_tick, start
+        if self._paused:
+            return
+        if self._rtf > 0.0:
+            self._step(self._stepper.t + min(elapsed, 2.0 * self._period) * self._rtf)
+        else:
+            deadline = start + 0.8 * self._period
+            while not self._paused and time.perf_counter() < deadline:
+                self._step(self._stepper.t + self._step_period)
+        busy = time.perf_counter() - start
+        self._tick_busy.append(busy)
+        if busy > self._period:
+            self.overruns += 1
+
+    def _step(self, t_target: float) -> None:
+        """Advance to ``t_target`` and publish; on a simulation failure pause and report it."""
+        try:
+            events = self._stepper.advance(t_target)
+        except SimulationError as err:
+            self.error = str(err)
+            self._paused = True
+            self.get_logger().error(f'simulation stopped (paused; call simulator/reset): {err}')
+            self._publish_diagnostics()
+            return
+        self._publish_state(events)
+
+    def _publish_state(self, events: list[Event]) -> None:
+        obs = self._stepper.observe()
+        stamp = messages.to_time(obs.t)
+        self._pub_pose.publish(messages.pose(obs, stamp))
+        self._pub_twist.publish(messages.twist(obs, stamp))
+        self._pub_wrench.publish(messages.contact_wrench(obs, stamp))
+        self._pub_joints.publish(messages.joint_state(self.joints, obs.strokes,
+                                                      self._stepper.stroke_velocities(), stamp))
+        for event in events:
+            if event.kind != 'reversal':
+                self._publish_mode(event.to_mode)
+        self._publish_mode(obs.mode)
+        if self._pub_clock is not None:
+            self._pub_clock.publish(messages.clock(stamp))
+        now = time.perf_counter()
+        if now - self._last_markers >= self._markers_period:
+            self._last_markers = now
+            surface = self._stepper.model.surface
+            self._pub_markers.publish(messages.surface_markers(obs, self._marker_xs, surface.centers,
+                                                               surface.widths, PART_SIZE, stamp))
+
+    def _publish_mode(self, mode: str) -> None:
+        if mode != self._mode:
+            self._mode = mode
+            self._pub_mode.publish(String(data=mode))
+
+    def _configure_surface_points(self) -> None:
+        surface = self._stepper.model.surface
+        c, w = np.asarray(surface.centers), np.asarray(surface.widths)
+        self._marker_xs = np.linspace(float(np.min(c - 4 * w)), float(np.max(c + 4 * w)), MARKER_POINTS)
+
+    # -- commands -----------------------------------------------------------------------------------
+
+    def _on_trajectory(self, msg: JointTrajectory) -> None:
+        try:
+            cmd = parse_trajectory(msg, self.joints, self._stepper.limits)
+            self._stepper.command_trajectory(cmd)
+        except (CommandRejected, ValueError) as err:
+            self._reject(str(err))
+
+    def _on_command(self, msg: Float64MultiArray) -> None:
+        try:
+            self._stepper.command_setpoints(parse_setpoints(msg.data, self._stepper.model.n_actuators,
+                                                            self._stepper.limits))
+        except CommandRejected as err:
+            self._reject(str(err))
+
+    def _reject(self, reason: str) -> None:
+        self.rejected += 1
+        self.last_rejection = reason
+        self.get_logger().warning(f'command rejected: {reason}')
+
+    # -- services -----------------------------------------------------------------------------------
+
+    def _on_reset(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        try:
+            model = build_model(values(self, self._model_specs))
+        except (ParameterError, ValueError) as err:
+            response.success, response.message = False, f'model parameters refused, not reset: {err}'
+            return response
+        self._stepper.reset(model)
+        self._model_pending = False
+        self.error = ''
+        self._mode = ''
+        self._configure_surface_points()
+        self._window = (time.perf_counter(), 0.0)
+        self._publish_state([])
+        response.success, response.message = True, 't = 0, model parameters applied'
+        return response
+
+    def _on_pause(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
+        if not request.data and self.error:
+            response.success, response.message = False, f'cannot resume after a failure: {self.error}'
+            return response
+        self._paused = request.data
+        self._last_tick = time.perf_counter()
+        response.success = True
+        response.message = f'{"paused" if self._paused else "running"} at t = {self._stepper.t:.9f} s'
+        return response
+
+    def _on_step(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        if not self._paused or self.error:
+            response.success = False
+            response.message = self.error or 'step needs the simulation paused (call simulator/pause true)'
+            return response
+        self._step(self._stepper.t + self._step_period)
+        response.success = not self.error
+        response.message = self.error or f't = {self._stepper.t:.9f} s'
+        return response
+
+    # -- parameters and diagnostics -----------------------------------------------------------------
+
+    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        reason = check_changes(self._specs, values(self, self._model_specs), params)
+        if reason is not None:
+            return SetParametersResult(successful=False, reason=reason)
+        for param in params:
+            if param.name == 'real_time_factor':
+                self._rtf = param.value
+            elif param.name == 'step_period':
+                self._step_period = param.value
+            elif param.name in self._model_specs:
+                self._model_pending = True
+        if self._model_pending:
+            self.get_logger().info('model parameters changed: applied on simulator/reset')
+        return SetParametersResult(successful=True)
+
+    def diagnostics(self) -> DiagnosticStatus:
+        """The simulator's status: achieved real-time factor over the last second, tick timing, counters."""
+        now, t = time.perf_counter(), self._stepper.t
+        wall0, sim0 = self._window
+        self.achieved_rtf = (t - sim0) / (now - wall0) if now > wall0 else 0.0
+        self._window = (now, t)
+        periods = np.asarray(self._tick_periods) * 1e3
+        busy = np.asarray(self._tick_busy) * 1e3
+        self._tick_periods.clear()
+        self._tick_busy.clear()
+
+        def pct(a: np.ndarray, q: float) -> str:
+            return f'{np.percentile(a, q):.3f}' if a.size else 'nan'
+
+        status = DiagnosticStatus(name=f'{self.get_name()}: loop', hardware_id='micro_feeder')
+        lagging = not self._paused and self._rtf > 0 and self.achieved_rtf < 0.95 * self._rtf
+        status.level = DiagnosticStatus.ERROR if self.error else (
+            DiagnosticStatus.WARN if lagging else DiagnosticStatus.OK)
+        status.message = self.error or ('paused' if self._paused else (
+            'behind real time: the physics cannot keep up' if lagging else 'running'))
+        items = {'sim_time_s': f'{t:.9f}', 'mode': self._stepper.state.mode, 'paused': str(self._paused),
+                 'real_time_factor_target': f'{self._rtf:g}', 'real_time_factor_achieved': f'{self.achieved_rtf:.4f}',
+                 'tick_period_p50_ms': pct(periods, 50), 'tick_period_p99_ms': pct(periods, 99),
+                 'tick_compute_p99_ms': pct(busy, 99), 'overruns': str(self.overruns),
+                 'rejected_commands': str(self.rejected), 'last_rejection': self.last_rejection,
+                 'model_parameters_pending_reset': str(self._model_pending)}
+        items.update({k: str(v) for k, v in self._stepper.state.transitions.items()})
+        status.values = [KeyValue(key=k, value=v) for k, v in items.items()]
+        if lagging:
+            self.get_logger().warning(f'behind real time: achieved real-time factor {self.achieved_rtf:.3f}',
+                                      throttle_duration_sec=10.0)
+        return status
+
+    def _publish_diagnostics(self) -> None:
+        self._pub_diag.publish(DiagnosticArray(header=Header(stamp=messages.to_time(self._stepper.t)),
+                                               status=[self.diagnostics()]))
+
+
+def main(args: list[str] | None = None) -> int:
+    """Console script ``simulator``: ``simulator --ros-args --params-file config/feeder.yaml -p ...``."""
+    return spin_node('simulator', Simulator, args)

@@ -1,0 +1,286 @@
+"""The simulator node in-process: real rclpy, an isolated Context per test, real topics, bounded waits."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Iterator
+
+import pytest
+from builtin_interfaces.msg import Duration
+from node_helpers import Probe, stamp_s
+from rcl_interfaces.msg import ParameterType
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, ReliabilityPolicy
+from ros_helpers import wait_until
+from std_msgs.msg import Float64MultiArray, Header, String
+from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from micro_feeder.nodes.actuator import sample_waveform
+from micro_feeder.nodes.commands import parse_trajectory
+from micro_feeder.nodes.messages import to_time
+from micro_feeder.nodes.simulator import Simulator, topic_qos
+from micro_feeder.nodes.stepper import Stepper, build_model
+from micro_feeder.physics.waveforms import StrokeParams
+
+STEP = 1e-3
+
+
+class Rig:
+    """A simulator, a probe and one executor spun on the test thread."""
+
+    def __init__(self, context: Context, **params: object):
+        self.sim = Simulator(context=context, overrides=params)
+        self.probe = Probe(context=context)
+        self.executor = SingleThreadedExecutor(context=context)
+        self.executor.add_node(self.sim)
+        self.executor.add_node(self.probe)
+
+    def wait(self, predicate, what: str, timeout: float = 10.0) -> None:
+        wait_until(predicate, timeout, executor=self.executor, what=what)
+
+    def send_trajectory(self, msg: JointTrajectory) -> None:
+        before = (len(self.sim.stepper.schedule.pieces), self.sim.rejected, id(self.sim.stepper.schedule))
+        self.probe.publish('actuator/trajectory', msg, self.executor)
+        self.wait(lambda: (len(self.sim.stepper.schedule.pieces), self.sim.rejected,
+                           id(self.sim.stepper.schedule)) != before, 'trajectory applied or rejected')
+
+    def step(self, n: int = 1) -> None:
+        self.probe.step(self.executor, n)
+
+    def close(self) -> None:
+        self.executor.shutdown()
+        self.probe.destroy_node()
+        self.sim.destroy_node()
+
+
+@pytest.fixture
+def stepped(ros_context: Context) -> Iterator[Rig]:
+    rig = Rig(ros_context, start_paused=True, step_period=STEP)
+    yield rig
+    rig.close()
+
+
+@pytest.fixture
+def running(ros_context: Context) -> Iterator[Rig]:
+    rig = Rig(ros_context)
+    yield rig
+    rig.close()
+
+
+def burst_message(stamp: float, params: StrokeParams | None = None) -> JointTrajectory:
+    """The actuator's default burst as a trajectory stamped at ``stamp`` (s, sim time)."""
+    times, pos, vel, acc = sample_waveform(params or StrokeParams(), 1, 40)
+    points = [JointTrajectoryPoint(positions=[float(pos[i, 0])], velocities=[float(vel[i, 0])],
+                                   accelerations=[float(acc[i, 0])],
+                                   time_from_start=Duration(sec=0, nanosec=round(t * 1e9)))
+              for i, t in enumerate(times)]
+    return JointTrajectory(header=_header(stamp), joint_names=['piezo_0'], points=points)
+
+
+def hold_message(stamp: float, offsets: list[float], positions: list[float]) -> JointTrajectory:
+    """Position-only knots (linear interpolation) stamped at ``stamp``."""
+    points = [JointTrajectoryPoint(positions=[p], time_from_start=Duration(sec=0, nanosec=round(t * 1e9)))
+              for t, p in zip(offsets, positions, strict=True)]
+    return JointTrajectory(header=_header(stamp), joint_names=['piezo_0'], points=points)
+
+
+def _header(stamp: float) -> Header:
+    return Header(stamp=to_time(stamp))
+
+
+def offline(commands: list[tuple[int, JointTrajectory]], n_steps: int) -> Stepper:
+    """What the node should compute: the same stepper fed the same commands before the given steps."""
+    stepper = Stepper(build_model({}))
+    for i in range(n_steps + 1):
+        for at, msg in commands:
+            if at == i:
+                stepper.command_trajectory(parse_trajectory(msg, ['piezo_0'], stepper.limits))
+        if i < n_steps:
+            stepper.advance(stepper.t + STEP)
+    return stepper
+
+
+def test_every_topic_with_its_type_frame_and_qos(running: Rig) -> None:
+    probe = running.probe
+    wanted = ['particle/pose', 'particle/twist', 'particle/contact_wrench', 'actuator/joint_states',
+              'particle/contact_state', 'surface/markers', '/clock', '/diagnostics']
+    running.wait(lambda: all(probe.msgs[t] for t in wanted), 'a message on every topic')
+    assert probe.msgs['particle/pose'][-1].header.frame_id == 'feeder'
+    assert probe.msgs['particle/twist'][-1].header.frame_id == 'feeder'
+    assert probe.msgs['particle/contact_wrench'][-1].header.frame_id == 'contact'
+    assert probe.msgs['actuator/joint_states'][-1].name == ['piezo_0']
+    assert probe.msgs['particle/contact_state'][0].data == 'stuck'
+    markers = probe.msgs['surface/markers'][-1].markers
+    assert [m.header.frame_id for m in markers] == ['feeder', 'feeder'] and len(markers[0].points) > 10
+    status = probe.msgs['/diagnostics'][-1].status[0]
+    keys = {kv.key for kv in status.values}
+    assert {'real_time_factor_achieved', 'overruns', 'rejected_commands', 'stick_to_slip', 'take_off'} <= keys
+    pose = probe.msgs['particle/pose'][-1].pose
+    assert pose.position.x == pytest.approx(0.5e-3) and pose.position.y == 0.0
+    expected = {'particle/pose': (ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 100),
+                'particle/contact_state': (ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 1),
+                'surface/markers': (ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 1),
+                '/clock': (ReliabilityPolicy.BEST_EFFORT, DurabilityPolicy.VOLATILE, 1),
+                'actuator/joint_states': (ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 100)}
+    for topic, (reliability, durability, depth) in expected.items():
+        (info,) = [i for i in probe.get_publishers_info_by_topic(topic) if i.node_name == 'simulator']
+        assert (info.qos_profile.reliability, info.qos_profile.durability) == (reliability, durability), topic
+        (publisher,) = [p for p in running.sim.publishers if p.topic_name == '/' + topic.lstrip('/')]
+        assert publisher.qos_profile.depth == depth, topic      # the depth is not visible in the graph
+    # a late subscriber still gets the latched contact state
+    late: list[String] = []
+    probe.create_subscription(String, 'particle/contact_state', late.append, topic_qos('particle/contact_state'))
+    running.wait(lambda: late, 'latched contact state')
+    assert late[0].data in ('stuck', 'sliding', 'flying')
+    # sim time runs at about real time
+    running.wait(lambda: running.sim.stepper.t > 0.3, 'sim time to pass 0.3 s')
+
+
+def test_clock_matches_header_stamps_and_steps(stepped: Rig) -> None:
+    probe = stepped.probe
+    stepped.step(5)
+    poses = probe.msgs['particle/pose'][-5:]
+    stepped.wait(lambda: len(probe.msgs['/clock']) >= 5, 'clock')
+    clocks = [stamp_s(c) for c in probe.msgs['/clock'][-5:]]
+    assert [stamp_s(p) for p in poses] == pytest.approx([0.001, 0.002, 0.003, 0.004, 0.005], abs=1e-12)
+    assert clocks == [stamp_s(p) for p in poses]
+    for topic in ('particle/twist', 'particle/contact_wrench', 'actuator/joint_states'):
+        assert stamp_s(probe.msgs[topic][-1]) == clocks[-1], topic
+
+
+def test_trajectory_moves_the_part_as_the_offline_simulation(stepped: Rig) -> None:
+    msg = burst_message(stamp=0.002)
+    stepped.step(1)
+    stepped.send_trajectory(msg)
+    stepped.step(9)
+    assert stepped.sim.rejected == 0
+    pose = stepped.probe.msgs['particle/pose'][-1]
+    predicted = offline([(1, msg)], 10)
+    assert abs(pose.pose.position.x - predicted.state.x) <= 1e-9
+    assert predicted.state.distance < -1e-6               # the burst moved it (toward the bump's centre)
+    # the same knots, integrated in one go rather than in 1 ms ticks
+    one_go = Stepper(build_model({}))
+    one_go.command_trajectory(parse_trajectory(msg, ['piezo_0'], one_go.limits))
+    one_go.advance(0.010)
+    assert abs(pose.pose.position.x - one_go.state.x) <= 1e-9
+    # transitions were counted, and the contact state followed them
+    assert predicted.state.transitions['stick_to_slip'] >= 1
+    modes = [m.data for m in stepped.probe.msgs['particle/contact_state']]
+    assert modes[0] == 'stuck' and 'sliding' in modes, modes
+
+
+def test_replacement_and_stop(stepped: Rig) -> None:
+    joints = stepped.probe.msgs['actuator/joint_states']
+    # ramp to 40 um over 10 ms from t = 1 ms; replaced at 4 ms by a ramp to 0 at 6 ms; stop at 5 ms
+    stepped.send_trajectory(hold_message(0.001, [0.0, 0.010], [0.0, 40e-6]))
+    stepped.send_trajectory(hold_message(0.004, [0.002], [0.0]))
+    stepped.step(4)
+    assert joints[-1].position[0] == pytest.approx(12e-6, rel=1e-9)       # 3 ms of the first ramp
+    stepped.step(1)                                                        # 5 ms: half-way back to 0
+    assert joints[-1].position[0] == pytest.approx(6e-6, rel=1e-9)
+    stepped.send_trajectory(JointTrajectory(header=_header(0.0)))          # empty: stop on receipt
+    stepped.step(3)
+    assert [j.position[0] for j in joints[-3:]] == pytest.approx([6e-6] * 3, rel=1e-9)
+    assert joints[-1].velocity[0] == 0.0
+    assert stepped.sim.rejected == 0
+
+
+def _bad_trajectories() -> dict[str, JointTrajectory]:
+    good = hold_message(0.0, [0.001, 0.002], [10e-6, 20e-6])
+    unknown = hold_message(0.0, [0.001], [10e-6])
+    unknown.joint_names = ['piezo_7']
+    order = hold_message(0.0, [0.002, 0.001], [10e-6, 20e-6])
+    nan = hold_message(0.0, [0.001, 0.002], [10e-6, math.nan])
+    far = hold_message(0.0, [0.001], [1e-3])
+    length = hold_message(0.0, [0.001], [10e-6])
+    length.points[0].positions = [10e-6, 1e-6]
+    velocities = hold_message(0.0, [0.001, 0.002], [10e-6, 20e-6])
+    velocities.points[0].velocities = [0.0]
+    return {'good': good, 'unknown joint': unknown, 'time order': order, 'non-finite': nan,
+            'outside limits': far, 'array length': length, 'velocities on some points': velocities}
+
+
+def test_bad_commands_are_rejected_counted_and_change_nothing(stepped: Rig) -> None:
+    msg = burst_message(stamp=0.001)
+    stepped.send_trajectory(msg)
+    stepped.step(1)
+    bad = _bad_trajectories()
+    del bad['good']
+    for name, cmd in bad.items():
+        before = stepped.sim.rejected
+        stepped.send_trajectory(cmd)
+        assert stepped.sim.rejected == before + 1, name
+    for data in ([1e-6, 2e-6], [math.inf], [5e-3]):      # wrong length, non-finite, outside the limits
+        before = stepped.sim.rejected
+        stepped.probe.publish('actuator/command', Float64MultiArray(data=data), stepped.executor)
+        stepped.wait(lambda b=before: stepped.sim.rejected == b + 1, f'command {data} rejected')
+    assert stepped.sim.rejected == len(bad) + 3
+    assert 'piezo limits' in stepped.sim.last_rejection
+    stepped.step(7)
+    predicted = offline([(0, msg)], 8)
+    assert stepped.probe.msgs['particle/pose'][-1].pose.position.x == predicted.state.x     # unaffected
+    assert predicted.state.distance < -1e-6                                                # and it moved
+    diag = stepped.sim.diagnostics()
+    assert {kv.key: kv.value for kv in diag.values}['rejected_commands'] == str(len(bad) + 3)
+
+
+def test_setpoints_through_the_piezo_model(ros_context: Context) -> None:
+    rig = Rig(ros_context, start_paused=True, step_period=STEP, **{'piezo.enabled': True})
+    try:
+        rig.probe.publish('actuator/command', Float64MultiArray(data=[30e-6]), rig.executor)
+        rig.wait(lambda: len(rig.sim.stepper.schedule.pieces) == 2, 'set-point applied')
+        rig.step(3)
+        positions = [j.position[0] for j in rig.probe.msgs['actuator/joint_states'][-3:]]
+        assert positions[-1] == pytest.approx(30e-6, rel=1e-3)      # a 50 kHz stack settles within 1 ms
+        assert rig.sim.rejected == 0
+    finally:
+        rig.close()
+
+
+def test_pause_step_reset(stepped: Rig) -> None:
+    probe, ex = stepped.probe, stepped.executor
+    probe.pause(ex, False)
+    response = probe.call(ex, Trigger, 'simulator/step')
+    assert not response.success and 'paused' in response.message
+    stepped.wait(lambda: stepped.sim.stepper.t > 0.05, 'sim time running')
+    assert probe.pause(ex, True).success
+    t_paused = stepped.sim.stepper.t
+    stepped.step(2)
+    assert stepped.sim.stepper.t == t_paused + STEP + STEP
+    assert probe.call(ex, Trigger, 'simulator/reset').success
+    assert stepped.sim.stepper.t == 0.0
+    stepped.wait(lambda: stamp_s(probe.msgs['particle/pose'][-1]) == 0.0, 'pose after reset')
+
+
+def test_parameters_refused_with_a_reason_and_applied_on_reset(stepped: Rig) -> None:
+    sim = stepped.sim
+    refused = {
+        'stroke.frequency': Parameter('stroke.frequency', value=-5.0),
+        'integration.dt': Parameter('integration.dt', value=0.0),                 # strict bound: > 0
+        'stroke.waveform': Parameter('stroke.waveform', value='square'),
+        'surface.widths': Parameter('surface.widths', value=[1e-3, 1e-3]),         # one per centre
+        'real_time_factor': Parameter('real_time_factor', value=-1.0),
+        'publish_rate': Parameter('publish_rate', value=10.0),                      # read-only
+    }
+    for name, param in refused.items():
+        (result,) = sim.set_parameters([param])
+        assert not result.successful and result.reason, name
+    assert sim.get_parameter('stroke.frequency').value == 1000.0
+    (descriptor,) = sim.describe_parameters(['stroke.frequency'])
+    assert descriptor.type == ParameterType.PARAMETER_DOUBLE and descriptor.floating_point_range
+    assert 'Hz' in descriptor.description
+    # related parameters together, atomically; model parameters apply on reset
+    result = sim.set_parameters_atomically([Parameter('surface.centers', value=[0.0, 2e-3]),
+                                            Parameter('surface.widths', value=[1e-3, 1e-3]),
+                                            Parameter('stroke.phases', value=[0.0, 0.25]),
+                                            Parameter('particle.x0', value=1e-3)])
+    assert result.successful, result.reason
+    assert sim.stepper.model.n_actuators == 1
+    assert stepped.probe.call(stepped.executor, Trigger, 'simulator/reset').success
+    assert sim.stepper.model.n_actuators == 2 and sim.joints == ['piezo_0', 'piezo_1']
+    stepped.wait(lambda: stepped.probe.msgs['particle/pose'][-1].pose.position.x == 1e-3, 'pose at the new x0')
+    (result,) = sim.set_parameters([Parameter('real_time_factor', value=0.0)])     # applies at once
+    assert result.successful
