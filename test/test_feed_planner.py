@@ -69,3 +69,27 @@ def test_goal_validation_names_the_parameter():
         FeedGoal(amplitude_start=200e-6, amplitude_max=150e-6)
     with pytest.raises(ParameterError, match=r'feed\.tolerance'):
         FeedGoal(tolerance=0.0)
+
+
+def fire_offline(model, state, burst: Burst, settle_s: float = 3e-3) -> None:
+    """Fire ``burst`` from the state's time on the real dynamics and let the part settle."""
+    stroke = model.stroke.replace(amplitude=burst.amplitude_m, count=burst.count, delay=state.t)
+    fired = model.replace(stroke=stroke)
+    model.advance(state, stroke.burst_end_s() + settle_s, source=fired.waveform())
+
+
+@pytest.mark.parametrize('target_x', [0.46e-3, 0.3e-3])
+def test_closed_loop_on_the_offline_dynamics(target_x):
+    """The planner feeds the part to the target on the real physics (default scenario)."""
+    from micro_feeder.physics.dynamics import FeederModel
+
+    model = FeederModel.from_settings({})
+    state = model.initial_state()
+    planner = FeedPlanner(FeedGoal(target_x=target_x, tolerance=1e-6))
+    while (burst := planner.next_burst(state.x)) is not None:
+        x_before = state.x
+        fire_offline(model, state, burst)
+        assert state.mode == 'stuck'
+        planner.observe(burst, x_before, state.x)
+    assert planner.status == 'reached', planner.reason
+    assert abs(state.x - target_x) <= 1e-6
