@@ -1,0 +1,63 @@
+"""The actuator node in-process: start/stop services, auto_start, parameters."""
+
+from __future__ import annotations
+
+import pytest
+from node_helpers import Probe
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from ros_helpers import wait_until
+from std_srvs.srv import Trigger
+
+from micro_feeder.nodes.actuator import Actuator
+
+
+def _rig(context: Context, **params: object) -> tuple[Actuator, Probe, SingleThreadedExecutor]:
+    actuator = Actuator(context=context, overrides=params)
+    probe = Probe(context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(actuator)
+    executor.add_node(probe)
+    return actuator, probe, executor
+
+
+def test_start_and_stop(ros_context: Context) -> None:
+    actuator, probe, ex = _rig(ros_context, auto_start=False, **{'stroke.count': 3, 'stroke.phases': [0.0, 0.25]})
+    try:
+        trajectories = probe.msgs['actuator/trajectory']
+        response = probe.call(ex, Trigger, 'actuator/start')
+        assert response.success and 'knots' in response.message
+        wait_until(lambda: trajectories, 10.0, executor=ex, what='burst')
+        burst = trajectories[-1]
+        assert burst.joint_names == ['piezo_0', 'piezo_1']
+        assert (burst.header.stamp.sec, burst.header.stamp.nanosec) == (0, 0)
+        point = burst.points[len(burst.points) // 3]
+        assert len(point.positions) == len(point.velocities) == len(point.accelerations) == 2
+        end = burst.points[-1].time_from_start
+        assert end.sec + end.nanosec * 1e-9 == pytest.approx(3.25e-3)
+        assert max(p.positions[0] for p in burst.points) == pytest.approx(100e-6, rel=1e-3)
+        assert probe.call(ex, Trigger, 'actuator/stop').success
+        wait_until(lambda: len(trajectories) == 2, 10.0, executor=ex, what='stop')
+        assert trajectories[-1].points == [] and trajectories[-1].joint_names == ['piezo_0', 'piezo_1']
+        # stroke parameters: refused with a reason, or applied to the next start
+        (result,) = actuator.set_parameters([Parameter('stroke.amplitude', value=-1e-6)])
+        assert not result.successful and 'stroke.amplitude' in result.reason
+        (result,) = actuator.set_parameters([Parameter('stroke.amplitude', value=50e-6)])
+        assert result.successful
+        probe.call(ex, Trigger, 'actuator/start')
+        wait_until(lambda: len(trajectories) == 3, 10.0, executor=ex, what='second burst')
+        assert max(p.positions[0] for p in trajectories[-1].points) == pytest.approx(50e-6, rel=1e-3)
+        assert actuator.bursts == 2 and actuator.stops == 1
+    finally:
+        ex.shutdown()
+
+
+def test_auto_start_sends_once_when_a_subscriber_appears(ros_context: Context) -> None:
+    actuator, probe, ex = _rig(ros_context)
+    try:
+        wait_until(lambda: probe.msgs['actuator/trajectory'], 10.0, executor=ex, what='auto-started burst')
+        wait_until(lambda: actuator._auto is None, 1.0, executor=ex, what='auto timer gone')
+        assert actuator.bursts == 1
+    finally:
+        ex.shutdown()
