@@ -1,0 +1,113 @@
+"""``micro-feeder run``: the actuator and the simulator (and optionally the recorder) in one process.
+
+ROS traffic stays on this host unless ``ROS_AUTOMATIC_DISCOVERY_RANGE`` is already set. The nodes share
+one EventsExecutor on the main thread; a live status line goes to stderr (when it is a terminal) and a
+summary to stdout at the end. Ctrl-C (or SIGTERM) ends the run cleanly, the log included.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from typing import Any, TextIO
+
+from ..physics.parameters import ParameterError
+from . import CommandError
+from ._common import add_model_options, settings_from_args
+
+STATUS_PERIOD = 0.2   # s (wall clock) between two status line updates
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    parser = subparsers.add_parser(
+        'run', help='run the actuator and simulator nodes (and a recorder) in one process',
+        description='Run the actuator and simulator ROS 2 nodes in one process: the actuator sends the '
+                    'stroke burst of the stroke.* parameters, the simulator publishes the part\'s state '
+                    '(docs/interface.md). Ends after --duration sim seconds or on Ctrl-C.')
+    add_model_options(parser)
+    parser.add_argument('--duration', type=float, metavar='SECONDS',
+                        help='sim time to run (s); default: until Ctrl-C')
+    parser.add_argument('--real-time-factor', type=float, default=1.0, metavar='RTF',
+                        help='sim seconds per wall second, 0 = as fast as possible (default 1)')
+    parser.add_argument('--record', metavar='PATH',
+                        help='record every topic to this log (rosbag2 directory with MCAP, see docs/logs.md)')
+    parser.set_defaults(func=run)
+
+
+def status_line(sim: Any) -> str:
+    """``sim 0.123456 s  running  stuck  x = +0.497393 mm  RTF 1.00`` (RTF: last second)."""
+    state = sim.stepper.state
+    run_mode = 'error' if sim.error else ('paused' if sim.paused else 'running')
+    return (f'sim {state.t:10.6f} s  {run_mode:7s}  {state.mode:7s}  x = {state.x * 1e3:+.6f} mm  '
+            f'RTF {sim.achieved_rtf:.2f}')
+
+
+def summary(sim: Any, actuator: Any, wall_s: float, log: str | None) -> str:
+    """What the run did, for stdout."""
+    state = sim.stepper.state
+    lines = [f'sim time        {state.t:.6f} s in {wall_s:.2f} s wall (real-time factor {state.t / wall_s:.3f})',
+             f'part            {state.mode} at x = {state.x * 1e3:.6f} mm, moved {state.distance * 1e6:+.3f} um, '
+             f'max speed {state.max_speed * 1e3:.3f} mm/s',
+             'transitions     ' + ', '.join(f'{k} {v}' for k, v in state.transitions.items()),
+             f'commands        {actuator.bursts} bursts sent, {sim.rejected} rejected; '
+             f'{sim.overruns} loop overruns']
+    if sim.error:
+        lines.append(f'error           {sim.error}')
+    if log:
+        lines.append(f'log             {log}')
+    return '\n'.join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    flat = settings_from_args(args)
+    if args.duration is not None and not args.duration > 0:
+        raise CommandError('--duration must be > 0')
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    import rclpy  # after the environment is set: rcl reads it at init
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
+    from rclpy.signals import SignalHandlerOptions
+
+    from ..nodes._ros import StopFlag
+    from ..nodes.actuator import Actuator
+    from ..nodes.simulator import Simulator
+    from ..nodes.spin import spin_nodes
+
+    context = Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    stop = StopFlag().install()
+    nodes: list[Any] = []
+    recorder = None
+    try:
+        try:
+            if args.record:
+                from ..nodes.recorder import Recorder
+                recorder = Recorder(context=context, parameter_overrides=[Parameter('output', value=args.record)])
+                nodes.append(recorder)
+            sim = Simulator(context=context, overrides={**flat, 'real_time_factor': args.real_time_factor})
+            nodes.append(sim)
+            actuator = Actuator(context=context, overrides=flat)
+            nodes.append(actuator)
+        except (ParameterError, ValueError, FileExistsError) as err:
+            raise CommandError(str(err)) from err
+        tty: TextIO | None = sys.stderr if sys.stderr.isatty() else None
+        if tty is not None:
+            sim.create_timer(STATUS_PERIOD, lambda: print('\r' + status_line(sim), end='', file=tty, flush=True))
+        start = time.perf_counter()
+        spin_nodes(nodes, lambda: bool(stop) or bool(sim.error) or (
+            args.duration is not None and sim.stepper.t >= args.duration), context)
+        wall = time.perf_counter() - start
+        if tty is not None:
+            print('\r' + status_line(sim), file=tty)
+        log = str(recorder.close()) if recorder is not None else None
+        recorder = None
+        print(summary(sim, actuator, wall, log))
+        return 1 if sim.error else 0
+    finally:
+        if recorder is not None:
+            recorder.close()
+        for node in nodes:
+            node.destroy_node()
+        rclpy.shutdown(context=context)
