@@ -58,8 +58,9 @@ DP_B = (35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84)
 DP_E = (71 / 57600, 0.0, -71 / 16695, 71 / 1920, -17253 / 339200, 22 / 525, -1 / 40)
 
 # aux: quantities of the last evaluation
-(AUX_N, AUX_T_REQ, AUX_QMAX, AUX_L, AUX_H, AUX_HX, AUX_HT, AUX_GAP, AUX_XS, AUX_LOAD_INDEX) = range(10)
-N_AUX = 10
+(AUX_N, AUX_T_REQ, AUX_QMAX, AUX_L, AUX_H, AUX_HX, AUX_HT, AUX_GAP, AUX_XS, AUX_LOAD_INDEX,
+ AUX_ROOT_SLOPE) = range(11)
+N_AUX = 11
 
 # Columns of a recorded row (then one stroke column per actuator).
 (C_T, C_MODE, C_X, C_Z, C_XD, C_ZD, C_THETA, C_N, C_FRICTION, C_QMAX, C_SEPARATION, C_GAP, C_H,
@@ -318,14 +319,17 @@ def locate_root(which: int, mode: int, direction: int, t: float, h: float, y0: n
     Illinois regula falsi, with bisection while the left end is not strictly positive (a margin that
     is 0 by construction at the start of a fresh mode). Returns the right end of the final bracket
     (where the margin is ≤ 0), narrower than the event tolerance; -1 if it could not be located.
+    The margin's slope across the final bracket (per second) is left in ``aux[AUX_ROOT_SLOPE]``.
     """
     tol = model[0][P_EVENT_TOL] / h
     a, b = 0.0, 1.0
     ga, gb = g_start, g_end
     side = 0
+    true_a, true_b = g_start, g_end          # unhalved margins at the bracket ends
     yi, dy = work[9], work[10]
     for it in range(200):
         if b - a <= tol:
+            aux[AUX_ROOT_SLOPE] = (true_b - true_a) / ((b - a) * h)
             return b
         if ga > 0.0 and it < 60:
             theta = b - gb * (b - a) / (gb - ga)
@@ -336,12 +340,12 @@ def locate_root(which: int, mode: int, direction: int, t: float, h: float, y0: n
         margins = evaluate(mode, direction, t + theta * h, yi, model, src, cur, st, aux, dy)
         g = margins[which]
         if g > 0.0:
-            a, ga = theta, g
+            a, ga, true_a = theta, g, g
             if side == 1:
                 gb *= 0.5
             side = 1
         else:
-            b, gb = theta, g
+            b, gb, true_b = theta, g, g
             if side == -1:
                 ga *= 0.5
             side = -1
@@ -571,7 +575,7 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
                     h *= max(0.2, 0.9 * err ** -0.2)
                 fs[FS_H] = h * min(5.0, max(0.2, 0.9 * max(err, 1e-10) ** -0.2))
             else:
-                h = min(dt if moving else prm[P_CHECK_STEP], t_next - t, t_target - t)
+                h = min(dt if moving or threshold else prm[P_CHECK_STEP], t_next - t, t_target - t)
                 rk4_step(mode, direction, t, y, f0, h, model, src, cur, st, aux, work, y1)
                 e0, e1 = evaluate(mode, direction, t + h, y1, model, src, cur, st, aux, f1)
             if not finite(y1) or math.isnan(e0) or math.isnan(e1):
@@ -606,10 +610,18 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
             if theta < 0.0:
                 status = EVENT_NOT_LOCATED
                 break
-            if adaptive and moving:
-                dopri5_step(mode, direction, t, y, f0, theta * h, model, src, cur, st, aux, work, y1)
-            else:
-                rk4_step(mode, direction, t, y, f0, theta * h, model, src, cur, st, aux, work, y1)
+            slope = aux[AUX_ROOT_SLOPE]
+            for attempt in range(2):        # step to the root; once more if the true margin disagrees
+                if adaptive and moving:
+                    dopri5_step(mode, direction, t, y, f0, theta * h, model, src, cur, st, aux, work, y1)
+                else:
+                    rk4_step(mode, direction, t, y, f0, theta * h, model, src, cur, st, aux, work, y1)
+                if attempt == 1 or not moving or slope >= 0.0:
+                    break
+                g_true = evaluate(mode, direction, t + theta * h, y1, model, src, cur, st, aux, f1)[which]
+                if abs(g_true) <= -slope * tol:   # the interpolant's root is the solution's root
+                    break
+                theta = min(max(theta - g_true / (slope * h), tol / h), 1.0)
             t += theta * h
             copy_into(y, y1)
             fs[FS_MAX_SPEED] = max(fs[FS_MAX_SPEED], abs(y[1]))
