@@ -1,0 +1,125 @@
+"""Benchmark of the simulator node at 1 kHz publishing, as a separate process seen by an outside client.
+
+Measures: achieved real-time factor (target: holds 1.0), CPU share of the simulator process (target
+<= 25 % of one core), tick period p50/p99 (target p99 <= 1.5 ms; from the node's /diagnostics), and the
+latency from a trajectory command to the first pose that reflects it (p50/p99; the pose's tilt changes
+as soon as the stroke does, since the part sits on the bump's flank).
+
+    .venv/bin/python bench/bench_nodes.py [--seconds 10] [--commands 60]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+os.environ.setdefault('ROS_DOMAIN_ID', str(60 + os.getpid() % 30))
+
+import rclpy  # imported after the environment is set: rcl reads it at init
+from builtin_interfaces.msg import Duration
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped
+from rclpy.executors import SingleThreadedExecutor
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+
+from micro_feeder.nodes.simulator import topic_qos
+
+CLK_TCK = os.sysconf('SC_CLK_TCK')
+
+
+def cpu_seconds(pid: int) -> float:
+    fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / CLK_TCK
+
+
+def spin_until(executor: SingleThreadedExecutor, predicate, timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > deadline:
+            return False
+        executor.spin_once(timeout_sec=0.005)
+    return True
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--seconds', type=float, default=10.0, help='steady-state measurement window (s)')
+    parser.add_argument('--commands', type=int, default=60, help='trajectory commands for the latency')
+    args = parser.parse_args()
+    exe = shutil.which('simulator', path=str(Path(sys.executable).parent))
+    proc = subprocess.Popen([exe, '--ros-args', '-p', 'publish_rate:=1000.0'], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    rclpy.init()
+    node = rclpy.create_node('bench_nodes')
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    poses: list[tuple[float, float, float]] = []       # (wall receive time, sim stamp, orientation.y)
+    diags: list[dict[str, str]] = []
+    qos = topic_qos('particle/pose')
+    qos.depth = 1000
+    node.create_subscription(PoseStamped, 'particle/pose', lambda m: poses.append(
+        (time.perf_counter(), m.header.stamp.sec + m.header.stamp.nanosec * 1e-9, m.pose.orientation.y)), qos)
+    node.create_subscription(DiagnosticArray, '/diagnostics', lambda m: diags.extend(
+        {kv.key: kv.value for kv in s.values} for s in m.status if s.name == 'simulator: loop'), 10)
+    pub = node.create_publisher(JointTrajectory, 'actuator/trajectory', topic_qos('actuator/trajectory'))
+    try:
+        if not spin_until(executor, lambda: len(poses) > 1000 and pub.get_subscription_count() > 0, 120):
+            print('simulator did not start', file=sys.stderr)
+            return 1
+        # steady state: real-time factor, CPU, tick timing
+        wall0, cpu0, n0, d0 = time.perf_counter(), cpu_seconds(proc.pid), len(poses), len(diags)
+        spin_until(executor, lambda: False, args.seconds)
+        wall1, cpu1 = time.perf_counter(), cpu_seconds(proc.pid)
+        window = poses[n0:]
+        rtf = (window[-1][1] - window[0][1]) / (window[-1][0] - window[0][0])
+        cpu = (cpu1 - cpu0) / (wall1 - wall0)
+        windows = diags[d0 + 1:] or diags[-1:]
+        p50 = float(np.median([float(d['tick_period_p50_ms']) for d in windows]))
+        p99 = [float(d['tick_period_p99_ms']) for d in windows]
+        rate = len(window) / (window[-1][0] - window[0][0])
+        # latency: alternate strokes of +-50 um reached 0.1 ms after receipt; first pose with the new tilt sign
+        latencies = []
+        for i in range(args.commands):
+            target = 50e-6 if i % 2 == 0 else -50e-6
+            msg = JointTrajectory(joint_names=['piezo_0'], points=[JointTrajectoryPoint(
+                positions=[target], time_from_start=Duration(nanosec=100_000))])
+            start = len(poses)
+            sent = time.perf_counter()
+            pub.publish(msg)
+            # tilt of the contact frame: orientation.y = sin(-theta/2), theta = atan(h_x); h_x < 0 for s > 0
+            # at x0 > c (the surface falls toward the part), so s > 0 -> theta < 0 -> orientation.y > 0
+            if spin_until(executor, lambda s=start, g=target: any(np.sign(p[2]) == np.sign(g) for p in poses[s:]),
+                          2.0):
+                first = next(p for p in poses[start:] if np.sign(p[2]) == np.sign(target))
+                latencies.append(first[0] - sent)
+            spin_until(executor, lambda: False, 0.03)
+        lat = np.asarray(latencies) * 1e3
+    finally:
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=20)
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.shutdown()
+    print(f'simulator process at publish_rate 1000 Hz, {args.seconds:g} s steady state ({os.cpu_count()} cores)')
+    print(f'  poses received          {rate:8.1f} /s')
+    print(f'  real-time factor        {rtf:8.4f}    target: holds 1.0')
+    print(f'  CPU share               {cpu * 100:7.1f} %    target: <= 25 % of one core')
+    print(f'  tick period p50         {p50:8.3f} ms')
+    print(f'  tick period p99         {np.median(p99):8.3f} ms (median of 1 s windows; worst {max(p99):.3f} ms)'
+          f'    target: <= 1.5 ms')
+    print(f'  command -> pose latency p50 {np.percentile(lat, 50):6.2f} ms, p99 {np.percentile(lat, 99):6.2f} ms '
+          f'({lat.size}/{args.commands} commands seen)')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
