@@ -279,15 +279,21 @@ class FeederModel:
         return events
 
     def run(self, duration: float | None = None, source: StrokeTable | StrokeSchedule | None = None,
-            state: FeederState | None = None) -> RunResult:
+            state: FeederState | None = None, output_step: float | None = None) -> RunResult:
         """Simulate from ``state`` (default: the initial state) for ``duration`` (default
-        :meth:`default_duration`) and return the time series (one row per step and per event)."""
+        :meth:`default_duration`) and return the time series: one row per integration step and per
+        event, plus (with ``output_step``, s) rows at least every ``output_step`` for smooth plots."""
         state = self.initial_state() if state is None else state
         t_end = state.t + (self.default_duration() if duration is None else duration)
         rows = [self._observe_row(state, source)]
-        events, recorded = self._integrate(state, t_end, source, record=True)
-        data = np.vstack(rows + recorded)
-        return RunResult(self.columns(), data, events, state)
+        events: list[Event] = []
+        stops = [t_end] if output_step is None else \
+            [*np.arange(state.t + output_step, t_end, output_step).tolist(), t_end]
+        for t_stop in stops:
+            chunk_events, recorded = self._integrate(state, t_stop, source, record=True)
+            events += chunk_events
+            rows += recorded
+        return RunResult(self.columns(), np.vstack(rows), events, state)
 
     def columns(self) -> tuple[str, ...]:
         """Names of the recorded columns (then ``stroke_k`` per actuator)."""

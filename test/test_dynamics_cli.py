@@ -1,0 +1,49 @@
+"""micro-feeder simulate and sweep: options, JSON keys, CSV and PNG outputs, refused values."""
+
+import csv
+import json
+
+import pytest
+
+from micro_feeder.cli import main
+
+
+def test_simulate_json_csv_and_plot(tmp_path, capsys):
+    assert main(['simulate', '--json', '--out', str(tmp_path), '--plot']) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert set(summary) == {'distance_m', 'final_mode', 'transitions', 'max_speed_mps', 'sim_time_s',
+                            'wall_time_s'}
+    assert set(summary['transitions']) == {'stick_to_slip', 'slip_to_stick', 'take_off', 'landing'}
+    assert summary['final_mode'] == 'stuck' and summary['sim_time_s'] == pytest.approx(3e-3)
+    with (tmp_path / 'simulate.csv').open() as handle:
+        rows = list(csv.DictReader(handle))
+    assert {'t', 'mode', 'x', 'friction', 'normal_load', 'stroke_0'} <= set(rows[0])
+    assert float(rows[-1]['x']) - float(rows[0]['x']) == pytest.approx(summary['distance_m'], rel=1e-12)
+    assert {r['mode'] for r in rows} == {'stuck', 'sliding'}
+    assert (tmp_path / 'simulate.png').stat().st_size > 10_000
+
+
+def test_simulate_refuses_bad_values(tmp_path, capsys):
+    assert main(['simulate', '--out', str(tmp_path), '--set', 'surface.widths=[1e-3, 2e-3]']) == 2
+    assert 'surface.widths' in capsys.readouterr().err
+    assert main(['simulate', '--out', str(tmp_path), '--set', 'stroke.frequency=-5']) == 2
+    assert 'stroke.frequency' in capsys.readouterr().err
+
+
+def test_sweep_table(tmp_path, capsys):
+    code = main(['sweep', '--vary', 'stroke.frequency=500,1000,3000', '--set', 'stroke.count=2',
+                 '--processes', '2', '--json', '--out', str(tmp_path), '--plot'])
+    assert code == 0
+    table = json.loads(capsys.readouterr().out)
+    rows = table['rows']
+    assert table['parameter'] == 'stroke.frequency'
+    assert [r['stroke.frequency'] for r in rows] == [500.0, 1000.0, 3000.0]
+    assert rows[0]['distance_m'] == 0.0 and rows[0]['stick_to_slip'] == 0
+    assert rows[1]['distance_per_stroke_m'] == pytest.approx(rows[1]['distance_m'] / 2)
+    assert rows[1]['stick_to_slip'] == 2 and rows[2]['take_off'] >= 1
+    assert (tmp_path / 'sweep.csv').exists() and (tmp_path / 'sweep.png').exists()
+
+
+def test_sweep_refuses_a_list_parameter(capsys):
+    assert main(['sweep', '--vary', 'surface.centers=0:1:3']) == 2
+    assert 'scalar' in capsys.readouterr().err
