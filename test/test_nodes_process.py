@@ -36,6 +36,7 @@ def _stop(proc: subprocess.Popen) -> tuple[int, str]:
 
 
 def test_actuator_and_simulator_processes(ros_context: Context) -> None:
+    """Up to 120 s for the first pose: a fresh process compiles the physics kernel when numba's cache is stale."""
     sim = _start('simulator', '-p', 'stroke.count:=2', '-p', 'markers_rate:=10.0')
     act = _start('actuator', '-p', 'stroke.count:=3', '-p', 'auto_start:=false')
     probe = Probe(context=ros_context)
@@ -43,7 +44,7 @@ def test_actuator_and_simulator_processes(ros_context: Context) -> None:
     executor.add_node(probe)
     try:
         msgs = probe.msgs
-        wait_until(lambda: len(msgs['particle/pose']) > 50 and msgs['/clock'], 60, executor=executor,
+        wait_until(lambda: len(msgs['particle/pose']) > 50 and msgs['/clock'], 120, executor=executor,
                    what='poses and clock from the simulator process')
         x0 = msgs['particle/pose'][-1].pose.position.x
         assert probe.call(executor, Trigger, 'actuator/start', timeout=20).success

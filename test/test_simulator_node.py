@@ -154,6 +154,7 @@ def test_clock_matches_header_stamps_and_steps(stepped: Rig) -> None:
 
 def test_trajectory_moves_the_part_as_the_offline_simulation(stepped: Rig) -> None:
     msg = burst_message(stamp=0.002)
+    stepped.wait(lambda: stepped.probe.msgs['particle/contact_state'], 'latched initial contact state')
     stepped.step(1)
     stepped.send_trajectory(msg)
     stepped.step(9)
