@@ -177,15 +177,9 @@ def channel_value(src: tuple, k: int, j: int, i: int, t: float) -> tuple[float, 
         return after[k], 0.0, 0.0
     tau = t - (start[k] + j * period[k] + seg_start[k, i])
     c = seg_coef[k, i]
-    s = c[5]
-    sd = 5.0 * c[5]
-    sdd = 20.0 * c[5]
-    for p in range(4, -1, -1):      # Horner on the polynomial and its two derivatives
-        s = s * tau + c[p]
-        if p >= 1:
-            sd = sd * tau + p * c[p]
-        if p >= 2:
-            sdd = sdd * tau + p * (p - 1) * c[p]
+    s = c[0] + tau * (c[1] + tau * (c[2] + tau * (c[3] + tau * (c[4] + tau * c[5]))))
+    sd = c[1] + tau * (2.0 * c[2] + tau * (3.0 * c[3] + tau * (4.0 * c[4] + tau * 5.0 * c[5])))
+    sdd = 2.0 * c[2] + tau * (6.0 * c[3] + tau * (12.0 * c[4] + tau * 20.0 * c[5]))
     w = c[COEF_OMEGA]
     if c[COEF_COS] != 0.0 or c[COEF_SIN] != 0.0:
         cw = math.cos(w * tau)

@@ -230,13 +230,7 @@ def locate_all(src: tuple, t: float, cur: np.ndarray) -> float:
 def rk4_step(mode: int, direction: int, t: float, y: np.ndarray, f0: np.ndarray, h: float, model: tuple,
              src: tuple, cur: np.ndarray, st: np.ndarray, aux: np.ndarray, work: np.ndarray,
              out: np.ndarray) -> None:
-    """One classical RK4 step of size ``h`` from (t, y) with slope ``f0`` at its start, into ``out``.
-
-    Stuck without the piezo model nothing moves: ``out`` = ``y`` at no cost (no RK work while stuck).
-    """
-    if mode == STUCK and model[0][P_PIEZO] == 0.0:
-        copy_into(out, y)
-        return
+    """One classical RK4 step of size ``h`` from (t, y) with slope ``f0`` at its start, into ``out``."""
     k2, k3, k4, ytmp = work[0], work[1], work[2], work[3]
     n = y.size
     for i in range(n):
@@ -337,8 +331,10 @@ def locate_root(which: int, mode: int, direction: int, t: float, h: float, y0: n
         else:
             theta = 0.5 * (a + b)
         hermite(theta, h, y0, f0, y1, f1, yi)
-        margins = evaluate(mode, direction, t + theta * h, yi, model, src, cur, st, aux, dy)
-        g = margins[which]
+        if mode == SLIDING and which == 0:  # the slide margin dir·ẋ needs no force evaluation
+            g = direction * yi[1]
+        else:
+            g = evaluate(mode, direction, t + theta * h, yi, model, src, cur, st, aux, dy)[which]
         if g > 0.0:
             a, ga, true_a = theta, g, g
             if side == 1:
@@ -576,7 +572,10 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
                 fs[FS_H] = h * min(5.0, max(0.2, 0.9 * max(err, 1e-10) ** -0.2))
             else:
                 h = min(dt if moving or threshold else prm[P_CHECK_STEP], t_next - t, t_target - t)
-                rk4_step(mode, direction, t, y, f0, h, model, src, cur, st, aux, work, y1)
+                if moving:
+                    rk4_step(mode, direction, t, y, f0, h, model, src, cur, st, aux, work, y1)
+                else:                           # stuck: nothing to integrate, only the checks
+                    copy_into(y1, y)
                 e0, e1 = evaluate(mode, direction, t + h, y1, model, src, cur, st, aux, f1)
             if not finite(y1) or math.isnan(e0) or math.isnan(e1):
                 status = NON_FINITE
@@ -612,13 +611,18 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
                 break
             slope = aux[AUX_ROOT_SLOPE]
             for attempt in range(2):        # step to the root; once more if the true margin disagrees
-                if adaptive and moving:
+                if not moving:
+                    copy_into(y1, y)
+                elif adaptive:
                     dopri5_step(mode, direction, t, y, f0, theta * h, model, src, cur, st, aux, work, y1)
                 else:
                     rk4_step(mode, direction, t, y, f0, theta * h, model, src, cur, st, aux, work, y1)
                 if attempt == 1 or not moving or slope >= 0.0:
                     break
-                g_true = evaluate(mode, direction, t + theta * h, y1, model, src, cur, st, aux, f1)[which]
+                if mode == SLIDING and which == 0:
+                    g_true = direction * y1[1]
+                else:
+                    g_true = evaluate(mode, direction, t + theta * h, y1, model, src, cur, st, aux, f1)[which]
                 if abs(g_true) <= -slope * tol:   # the interpolant's root is the solution's root
                     break
                 theta = min(max(theta - g_true / (slope * h), tol / h), 1.0)

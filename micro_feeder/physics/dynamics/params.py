@@ -22,7 +22,7 @@ class IntegrationParams(ParameterGroup):
     dt: float = param(1e-4, 'rk4: the step; dopri5: the largest step', 's', gt=0, le=1e-3)
     tolerance: float = param(1e-10, 'dopri5: error allowed per step on positions (m); on velocities '
                              'tolerance / dt (m/s)', 'm', gt=0)
-    check_step: float = param(5e-5, 'sampling step of the stick-limit and pull-off checks while stuck '
+    check_step: float = param(1e-4, 'sampling step of the stick-limit and pull-off checks while stuck '
                               '(nothing is integrated then); a dip shorter than this can be missed',
                               's', gt=0, le=1e-3)
     event_tolerance: float = param(1e-9, 'time tolerance of event location', 's', gt=0, le=1e-6)
