@@ -277,7 +277,7 @@ def dopri5_step(mode: int, direction: int, t: float, y: np.ndarray, f0: np.ndarr
                              + DP_B[5] * k6[i])
 
 
-@jit
+@jit_inline
 def dopri5_error(h: float, f0: np.ndarray, work: np.ndarray, f1: np.ndarray, tolerance: float,
                  max_step: float) -> float:
     """Embedded error estimate of the last :func:`dopri5_step` (slope ``f1`` at its end), as a multiple
@@ -543,7 +543,8 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
         which = -1
         grazing = False
         if need_eval:
-            t_next = locate_all(src, t, cur)
+            if t >= t_next:                     # a new segment (or the first): point the cursor at it
+                t_next = locate_all(src, t, cur)
             if threshold and mode != FLYING:
                 kind = threshold_decision(t, y, model, src, cur, st, aux, iv, fs)
                 if kind >= 0:

@@ -1,0 +1,93 @@
+"""Benchmark: offline speed of the particle dynamics and of a frequency sweep (issue 3).
+
+Usage: .venv/bin/python bench/bench_dynamics.py [--skip-compile]
+
+1. Speed (x real time) on the default scenario (config/feeder.yaml) with strokes back to back for 1 s
+   of sim time (1000 strokes at 1 kHz; the part slides in every one of them), on one core; best of 3
+   (CPU time of this process, so other load on the machine counts less). Target >= 200x, goal 1000x.
+2. A 200-frequency x 5-stroke sweep (100..5000 Hz) on 2 worker processes, wall time. Target <= 5 s.
+3. Accuracy of the default step: distance per stroke with the default integration settings against
+   the dt -> 0 limit (tight tolerance, 1 us largest step) on the benchmark cases. Target <= 0.1 %.
+4. First-call compile time of the kernel in a fresh process with an empty numba cache (what a new
+   installation pays once; later processes load the cache).
+"""
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+from micro_feeder.cli.sweep import sweep
+from micro_feeder.physics.dynamics import FeederModel
+
+SPEED_TARGET, SPEED_GOAL, SWEEP_TARGET_S, ACCURACY_TARGET = 200.0, 1000.0, 5.0, 1e-3
+CASES = [('default: 1 kHz, 100 um (stick-slide-stick)', {}),
+         ('1 kHz, 200 um', {'amplitude': 200e-6}),
+         ('2 kHz, 100 um (take-off)', {'frequency': 2000.0}),
+         ('3 kHz, 100 um (take-off)', {'frequency': 3000.0})]
+
+
+def speed(model: FeederModel) -> float:
+    busy = model.replace(stroke=model.stroke.replace(count=1000))
+    best = 0.0
+    for _ in range(3):
+        state = busy.initial_state()
+        busy.advance(state, 1e-3)
+        start = time.process_time()
+        busy.advance(state, 1.0)
+        best = max(best, (1.0 - 1e-3) / (time.process_time() - start))
+    slips = state.transitions['stick_to_slip']
+    print(f'offline speed, default scenario, 1000 strokes back to back ({slips} slides): {best:.0f}x real '
+          f'time on one core (target >= {SPEED_TARGET:.0f}x, goal {SPEED_GOAL:.0f}x)')
+    return best
+
+
+def sweep_time() -> float:
+    values = [100.0 + i * (5000.0 - 100.0) / 199 for i in range(200)]
+    start = time.perf_counter()
+    rows = sweep({'stroke.count': 5}, 'stroke.frequency', values, processes=2, progress=False)
+    wall = time.perf_counter() - start
+    flights = sum(r['take_off'] > 0 for r in rows)
+    print(f'sweep, 200 frequencies x 5 strokes on 2 processes: {wall:.2f} s wall ({flights} runs with a '
+          f'take-off; target <= {SWEEP_TARGET_S:.0f} s)')
+    return wall
+
+
+def accuracy(model: FeederModel) -> None:
+    print(f'default step (method {model.integration.method}, dt {model.integration.dt:g} s, tolerance '
+          f'{model.integration.tolerance:g} m, check_step {model.integration.check_step:g} s) against dt -> 0:')
+    for label, stroke in CASES:
+        m = model.replace(stroke=model.stroke.replace(**stroke))
+        limit = m.replace(integration=m.integration.replace(dt=1e-6, tolerance=1e-14, check_step=1e-6))
+        got, ref = (run.run().state.distance for run in (m, limit))
+        print(f'  {label:<45} {got * 1e6:>10.5f} um vs {ref * 1e6:>10.5f} um: '
+              f'{abs(got / ref - 1):.1e} (target <= {ACCURACY_TARGET:.0e})')
+
+
+def compile_time() -> None:
+    with tempfile.TemporaryDirectory() as cache:
+        env = dict(os.environ, NUMBA_CACHE_DIR=cache)
+        code = 'from micro_feeder.physics.dynamics import FeederModel; FeederModel().run()'
+        start = time.perf_counter()
+        subprocess.run([sys.executable, '-c', code], env=env, check=True)
+        cold = time.perf_counter() - start
+        start = time.perf_counter()
+        subprocess.run([sys.executable, '-c', code], env=env, check=True)
+        warm = time.perf_counter() - start
+    print(f'first run in a fresh process: {cold:.1f} s with an empty numba cache (compile), '
+          f'{warm:.1f} s with the cache (import + load + run)')
+
+
+def main() -> None:
+    model = FeederModel()
+    model.run()
+    speed(model)
+    sweep_time()
+    accuracy(model)
+    if '--skip-compile' not in sys.argv:
+        compile_time()
+
+
+if __name__ == '__main__':
+    main()
