@@ -31,6 +31,8 @@ TOPICS: tuple[TopicSpec, ...] = (
     TopicSpec('particle/contact_wrench', 'geometry_msgs/msg/WrenchStamped', depth=100),
     TopicSpec('particle/contact_state', 'std_msgs/msg/String', transient_local=True, depth=1),
     TopicSpec('surface/markers', 'visualization_msgs/msg/MarkerArray', depth=1),
+    TopicSpec('simulator/parameters', 'rcl_interfaces/msg/ParameterEvent', transient_local=True, depth=1),
+    TopicSpec('simulator/command_receipts', 'std_msgs/msg/Header', depth=100),
     TopicSpec('/clock', 'rosgraph_msgs/msg/Clock', reliable=False, depth=1),
     TopicSpec('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', depth=10),
 )

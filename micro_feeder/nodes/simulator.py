@@ -7,19 +7,25 @@ docs/interface.md. Commands on ``actuator/trajectory`` / ``actuator/command`` ar
 (:mod:`.commands`) and applied by their stamps in sim time, so a paused run advanced with
 ``simulator/step`` is repeatable bit for bit. Model parameters can be set at any time and are applied
 on ``simulator/reset``; ``real_time_factor`` and ``step_period`` apply at once.
+
+For ``resim`` (:mod:`.resim`) a log must say what the simulator did with each command: the parameters in
+force go out on the latched ``simulator/parameters`` (at start, on reset, on a change that applies at
+once) and every command received, applied or refused, is acknowledged on ``simulator/command_receipts``
+with the sim time it was received at.
 """
 
 from __future__ import annotations
 
 import collections
 import time
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
-from rcl_interfaces.msg import SetParametersResult
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.msg import ParameterEvent, SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -81,6 +87,7 @@ class Simulator(Node):
         self._specs = {**self._model_specs, **NODE_SPECS}
         declare(self, self._specs, overrides)
         self._stepper = Stepper(build_model(values(self, self._model_specs)))
+        self._model_parameters = self._parameter_msgs(self._model_specs)
         self._model_pending = False
         p = values(self, NODE_SPECS)
         self._rtf: float = p['real_time_factor']
@@ -90,6 +97,7 @@ class Simulator(Node):
         self._paused: bool = p['start_paused']
         self._markers_period = 1.0 / p['markers_rate']
         self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.add_post_set_parameters_callback(self._after_set_parameters)
 
         self._pub_pose = self._publisher(PoseStamped, 'particle/pose')
         self._pub_twist = self._publisher(TwistStamped, 'particle/twist')
@@ -99,6 +107,8 @@ class Simulator(Node):
         self._pub_markers = self._publisher(MarkerArray, 'surface/markers')
         self._pub_clock = self._publisher(ClockMsg, '/clock') if self._publish_clock else None
         self._pub_diag = self._publisher(DiagnosticArray, '/diagnostics')
+        self._pub_parameters = self._publisher(ParameterEvent, 'simulator/parameters')
+        self._pub_receipts = self._publisher(Header, 'simulator/command_receipts')
         self.create_subscription(JointTrajectory, 'actuator/trajectory', self._on_trajectory,
                                  topic_qos('actuator/trajectory'))
         self.create_subscription(Float64MultiArray, 'actuator/command', self._on_command,
@@ -120,6 +130,7 @@ class Simulator(Node):
         self._window = (time.perf_counter(), self._stepper.t)
         self.achieved_rtf = 0.0
         self._configure_surface_points()
+        self._publish_parameters()
         self._publish_state([])
         self.create_timer(self._period, self._tick, clock=steady)
         self.create_timer(1.0, self._publish_diagnostics, clock=steady)
@@ -205,7 +216,12 @@ class Simulator(Node):
 
     # -- commands -----------------------------------------------------------------------------------
 
+    def _acknowledge(self, topic: str) -> None:
+        """``simulator/command_receipts``: a command arrived on ``topic`` at the current sim time."""
+        self._pub_receipts.publish(Header(stamp=messages.to_time(self._stepper.t), frame_id=topic))
+
     def _on_trajectory(self, msg: JointTrajectory) -> None:
+        self._acknowledge('actuator/trajectory')
         try:
             cmd = parse_trajectory(msg, self.joints, self._stepper.limits)
             self._stepper.command_trajectory(cmd)
@@ -213,6 +229,7 @@ class Simulator(Node):
             self._reject(str(err))
 
     def _on_command(self, msg: Float64MultiArray) -> None:
+        self._acknowledge('actuator/command')
         try:
             self._stepper.command_setpoints(parse_setpoints(msg.data, self._stepper.model.n_actuators,
                                                             self._stepper.limits))
@@ -233,11 +250,13 @@ class Simulator(Node):
             response.success, response.message = False, f'model parameters refused, not reset: {err}'
             return response
         self._stepper.reset(model)
+        self._model_parameters = self._parameter_msgs(self._model_specs)
         self._model_pending = False
         self.error = ''
         self._mode = ''
         self._configure_surface_points()
         self._window = (time.perf_counter(), 0.0)
+        self._publish_parameters()
         self._publish_state([])
         response.success, response.message = True, 't = 0, model parameters applied'
         return response
@@ -278,6 +297,20 @@ class Simulator(Node):
         if self._model_pending:
             self.get_logger().info('model parameters changed: applied on simulator/reset')
         return SetParametersResult(successful=True)
+
+    def _after_set_parameters(self, params: list[Parameter]) -> None:
+        if any(p.name in NODE_SPECS for p in params):
+            self._publish_parameters()
+
+    def _parameter_msgs(self, names: Iterable[str]) -> list[ParameterMsg]:
+        return [self.get_parameter(name).to_parameter_msg() for name in names]
+
+    def _publish_parameters(self) -> None:
+        """The parameters in force on the latched ``simulator/parameters``, stamped with the sim time: the
+        model's as last applied (not a change waiting for reset) and the node's current ones."""
+        self._pub_parameters.publish(ParameterEvent(
+            stamp=messages.to_time(self._stepper.t), node=self.get_fully_qualified_name(),
+            new_parameters=self._model_parameters + self._parameter_msgs(NODE_SPECS)))
 
     def diagnostics(self) -> DiagnosticStatus:
         """The simulator's status: achieved real-time factor over the last second, tick timing, counters."""

@@ -1,0 +1,154 @@
+"""``resim``: a stepped-mode log recorded by the real recorder re-simulates bit for bit; a changed
+parameter does not. The log comes from the simulator node driven in-process through ``simulator/step``
+with trajectory and set-point commands (stamp 0, a future stamp, a refused one)."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+import rclpy
+from node_helpers import Probe
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from ros_helpers import wait_until
+from std_msgs.msg import Float64MultiArray
+
+from micro_feeder.cli import main as cli_main
+from micro_feeder.logs.reader import LogReader
+from micro_feeder.nodes import messages
+from micro_feeder.nodes.actuator import sample_waveform
+from micro_feeder.nodes.commands import joint_names
+from micro_feeder.nodes.recorder import Recorder
+from micro_feeder.nodes.resim import resimulate, stop_times
+from micro_feeder.nodes.simulator import Simulator
+from micro_feeder.physics.waveforms import StrokeParams
+
+STEP = 1e-4     # s: not a power of two, so sim times are sums that only the simulator's own additions reproduce
+TIMEOUT = 10.0  # s, any single wait
+
+
+def _burst(stamp_s: float) -> object:
+    """The actuator's burst (4 strokes, 80 um) stamped at ``stamp_s`` (s, sim time; 0 = on receipt)."""
+    times, pos, vel, acc = sample_waveform(StrokeParams(count=4, amplitude=80e-6), 1, 40)
+    return messages.trajectory(joint_names(1), times, pos, vel, acc, messages.to_time(stamp_s))
+
+
+def _hold(stamp_s: float, stroke: float) -> object:
+    """Position-only knots (linear interpolation): from 0 to ``stroke`` (m) in 0.5 ms from ``stamp_s``."""
+    zeros = np.zeros((2, 1))
+    msg = messages.trajectory(joint_names(1), np.array([0.0, 5e-4]), np.array([[0.0], [stroke]]), zeros, zeros,
+                              messages.to_time(stamp_s))
+    for point in msg.points:
+        point.velocities, point.accelerations = [], []
+    return msg
+
+
+def _record_stepped_run(context: Context, path: Path) -> dict[str, int]:
+    """Simulator paused, recorder and a probe in one executor; commands between steps. Returns what the
+    recorder received per topic."""
+    recorder = Recorder(context=context, parameter_overrides=[Parameter('output', value=str(path)),
+                                                              Parameter('flush_period', value=0.2)])
+    sim = Simulator(context=context, overrides={'start_paused': True, 'step_period': STEP})
+    probe = Probe(context=context)
+    executor = SingleThreadedExecutor(context=context)
+    for node in (recorder, sim, probe):
+        executor.add_node(node)
+
+    def wait(predicate, what: str) -> None:
+        wait_until(predicate, TIMEOUT, executor=executor, what=what)
+
+    def send(topic: str, msg: object) -> None:
+        count = recorder.received['/simulator/command_receipts']
+        probe.publishers_[topic].publish(msg)
+        wait(lambda: recorder.received['/simulator/command_receipts'] == count + 1, f'receipt of {topic}')
+
+    try:
+        wait(lambda: all(pub.get_subscription_count() == 3 for pub in probe.publishers_.values())  # +probe's own
+             and sim.count_subscribers('particle/pose') == 2
+             and sim.count_subscribers('simulator/command_receipts') == 2
+             and recorder.received['/simulator/parameters'] == 1, 'recorder and probe matched')
+        send('actuator/trajectory', _burst(0.0))                     # stamp 0 at t = 0: on receipt
+        probe.step(executor, 60)
+        send('actuator/trajectory', _hold(0.0093, 30e-6))            # a future stamp: at t = 9.3 ms
+        probe.step(executor, 60)
+        send('actuator/trajectory', _burst(0.0))                     # stamp 0 mid-run: at the paused time
+        probe.step(executor, 80)
+        send('actuator/command', Float64MultiArray(data=[10e-6]))    # a set-point, held from receipt
+        probe.step(executor, 20)
+        send('actuator/trajectory', _hold(0.0, 1.0))                 # outside the piezo limits: refused
+        send('actuator/trajectory', _hold(0.001, 5e-6))              # a stamp in the past: starts now
+        probe.step(executor, 40)
+        assert sim.rejected == 1
+        wait(lambda: recorder.received['/particle/pose'] >= 260, 'every pose recorded')
+        received = {topic: n for topic, n in recorder.received.items()}
+    finally:
+        executor.shutdown()
+        recorder.close()
+        for node in (probe, sim, recorder):
+            node.destroy_node()
+    return received
+
+
+@pytest.fixture(scope='module')
+def stepped_log(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    path = tmp_path_factory.mktemp('resim') / 'stepped'
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        received = _record_stepped_run(context, path)
+    finally:
+        rclpy.shutdown(context=context)
+    assert received['/actuator/trajectory'] == 5 and received['/actuator/command'] == 1
+    yield path
+
+
+def test_stepped_log_resimulates_bit_for_bit(stepped_log: Path) -> None:
+    log = LogReader(stepped_log)
+    xs = {m.message.pose.position.x for m in log.messages(['particle/pose'])}
+    assert len(xs) > 10, 'the part must move, or a zero difference proves nothing'
+    report = resimulate(log)
+    assert report.poses == log.topics['/particle/pose'].count in (260, 261)  # 261: the pose at t = 0 too
+    assert report.commands_applied == 5 and report.commands_rejected == 1
+    assert report.exact_stop_times and report.receipts == 'recorded' and report.mode == 'stepped'
+    assert report.max_error == 0.0 and report.identical, report.verdict()
+    assert report.parameters.startswith('recorded')
+
+
+def test_a_changed_parameter_shows_as_a_difference(stepped_log: Path) -> None:
+    report = resimulate(LogReader(stepped_log), {'particle.mass': 2.2e-9})
+    assert report.poses >= 260
+    assert report.max_error > 1e-9 and not report.identical
+
+
+def test_cli_verdict_json_and_tolerance(stepped_log: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli_main(['resim', str(stepped_log), '--tolerance', '0']) == 0
+    out = capsys.readouterr().out
+    assert out.startswith('resim: IDENTICAL: re-simulated bit for bit (26') and len(out.splitlines()) == 1
+    assert cli_main(['resim', str(stepped_log), '--json']) == 0
+    report = json.loads(capsys.readouterr().out)
+    assert report['identical'] and report['max_error'] == 0.0 and report['poses'] >= 260
+    assert cli_main(['resim', str(stepped_log), '--set', 'gravity=5.0', '--tolerance', '1e-12']) == 1
+    assert capsys.readouterr().out.startswith('resim: DIFFERENT: largest difference')
+
+
+def test_real_time_stamps_are_not_exact_stop_times() -> None:
+    stepped = [(round(k * 1e-3 * 1e9), 0.0, 0.0) for k in (1, 2, 5)]        # step 3 and 4 unrecorded
+    stops, exact = stop_times(stepped, [1e-3])
+    assert exact and [s.pose is not None for s in stops] == [True, True, False, False, True]
+    assert stops[-1].t == 1e-3 + 1e-3 + 1e-3 + 1e-3 + 1e-3                     # the simulator's own sums
+    stops, exact = stop_times([(1_000_370, 0.0, 0.0), (2_001_020, 0.0, 0.0)], [1e-3])   # wall-clock jitter
+    assert not exact and [s.t for s in stops] == [1_000_370 / 1e9, 2_001_020 / 1e9]
+
+
+def test_log_without_pose_is_an_error(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    from micro_feeder.logs.writer import LogWriter
+    writer = LogWriter(tmp_path / 'empty')
+    writer.add_topic('/clock', 'rosgraph_msgs/msg/Clock', '')
+    writer.close()
+    assert cli_main(['resim', str(tmp_path / 'empty')]) == 2
+    assert 'no particle/pose' in capsys.readouterr().err
