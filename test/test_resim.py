@@ -20,6 +20,7 @@ from std_msgs.msg import Float64MultiArray
 
 from micro_feeder.cli import main as cli_main
 from micro_feeder.logs.reader import LogReader
+from micro_feeder.logs.summary import format_summary, summarize
 from micro_feeder.nodes import messages
 from micro_feeder.nodes.actuator import sample_waveform
 from micro_feeder.nodes.commands import joint_names
@@ -152,3 +153,14 @@ def test_log_without_pose_is_an_error(tmp_path: Path, capsys: pytest.CaptureFixt
     writer.close()
     assert cli_main(['resim', str(tmp_path / 'empty')]) == 2
     assert 'no particle/pose' in capsys.readouterr().err
+
+
+def test_info_says_how_the_simulator_ran(stepped_log: Path) -> None:
+    summary = summarize(LogReader(stepped_log))
+    assert summary.simulator.mode == 'stepped' and summary.simulator.step_period == STEP
+    assert summary.simulator.commands_received == 6
+    rows = {t.name: t for t in summary.topics}
+    assert rows['/actuator/trajectory'].rate is None and rows['/particle/pose'].rate > 0
+    text = format_summary(summary)
+    assert f'stepped through simulator/step, {STEP:g} s per step; 6 commands received' in text
+    assert '– 0.025900 s (particle/pose stamps)' in text

@@ -1,4 +1,5 @@
-"""A log's summary: topics, types, counts, rates, duration, final part state, recorder loss counters.
+"""A log's summary: topics, types, counts, rates, duration, sim time, how the simulator ran, final part
+state, recorder loss counters.
 
 The loss counters come from the recorder: its ``micro_feeder.recorder`` metadata record on a clean stop,
 or, in a truncated log, the last of its ``/diagnostics`` messages that made it to disk (same keys).
@@ -11,29 +12,44 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .reader import LogReader
+from .sim_parameters import recorded_parameters, run_mode
 
 RECORDER_STATUS_PREFIX = 'recorder'
+RATE_MIN_COUNT = 10  # topics with fewer messages are events (commands, mode changes): no rate shown
 
 
 @dataclass
 class TopicRow:
     """One topic of the summary: name, type, count, average rate [Hz] between its first and last
-    message."""
+    message (None for fewer than ``RATE_MIN_COUNT`` messages, where a rate says little)."""
 
     name: str
     type: str
     count: int
-    rate: float
+    rate: float | None
 
 
 @dataclass
 class PartState:
-    """The part's last recorded state: stamp [s], position x, z [m], contact mode."""
+    """The part's last recorded state: stamp [s], position x, z [m], contact mode; and its first
+    recorded pose (stamp [s], x [m]) to say how far it moved."""
 
     stamp: float | None = None
     x: float | None = None
     z: float | None = None
     mode: str | None = None
+    first_stamp: float | None = None
+    first_x: float | None = None
+
+
+@dataclass
+class SimulatorRun:
+    """How the simulator ran, from its recorded parameters and command receipts (None/0 when absent)."""
+
+    mode: str = 'unknown'
+    real_time_factor: float | None = None
+    step_period: float | None = None
+    commands_received: int = 0
 
 
 @dataclass
@@ -48,6 +64,7 @@ class LogSummary:
     duration: float
     topics: list[TopicRow]
     part: PartState
+    simulator: SimulatorRun
     recorder: dict[str, str] = field(default_factory=dict)
     recorder_source: str = ''  # 'summary', 'diagnostics' or ''
 
@@ -68,12 +85,24 @@ def recorder_counters(log: LogReader) -> tuple[dict[str, str], str]:
     return counters, 'diagnostics' if counters else ''
 
 
-def _rate(log: LogReader, topic: str, count: int) -> float:
-    """Messages per second between the first and the last message of a topic."""
-    if count < 2:
-        return 0.0
+def _rate(log: LogReader, topic: str, count: int) -> float | None:
+    """Messages per second between the first and the last message of a topic (None for an event topic)."""
+    if count < RATE_MIN_COUNT:
+        return None
     span = (log.last(topic).log_time_ns - log.first(topic).log_time_ns) * 1e-9
-    return (count - 1) / span if span > 0 else 0.0
+    return (count - 1) / span if span > 0 else None
+
+
+def simulator_run(log: LogReader) -> SimulatorRun:
+    """The simulator's run mode and settings (first recorded snapshot) and the commands it received."""
+    snapshots = recorded_parameters(log)
+    receipts = log.resolve('simulator/command_receipts')
+    run = SimulatorRun(commands_received=log.topics[receipts].count if receipts else 0)
+    if snapshots:
+        first = snapshots[0]
+        run.mode, run.real_time_factor, run.step_period = (run_mode(first), first.get('real_time_factor'),
+                                                           first.get('step_period'))
+    return run
 
 
 def summarize(log: LogReader) -> LogSummary:
@@ -85,12 +114,14 @@ def summarize(log: LogReader) -> LogSummary:
     if pose is not None:
         p = pose.message.pose.position
         part.stamp, part.x, part.z = pose.publish_time, p.x, p.z
+        first = log.first('particle/pose')
+        part.first_stamp, part.first_x = first.publish_time, first.message.pose.position.x
     state = log.last('particle/contact_state')
     if state is not None:
         part.mode = state.message.data
     counters, source = recorder_counters(log)
     return LogSummary(log.path, log.files, sum(f.stat().st_size for f in log.files), log.truncated,
-                      log.start_ns, log.duration, rows, part, counters, source)
+                      log.start_ns, log.duration, rows, part, simulator_run(log), counters, source)
 
 
 def _size(n: int) -> str:
@@ -132,8 +163,10 @@ def format_summary(s: LogSummary) -> str:
     wname = max([len('topic'), *(len(t.name) for t in s.topics)])
     wtype = max([len('type'), *(len(t.type) for t in s.topics)])
     lines.append(f'{"topic":<{wname}}  {"type":<{wtype}}  {"count":>9}  {"rate":>10}')
-    lines += [f'{t.name:<{wname}}  {t.type:<{wtype}}  {t.count:>9,}  {t.rate:>7.1f} Hz' for t in s.topics]
+    lines += [f'{t.name:<{wname}}  {t.type:<{wtype}}  {t.count:>9,}  '
+              + (f'{t.rate:>7.1f} Hz' if t.rate is not None else f'{"–":>10}') for t in s.topics]
     lines.append('')
+    lines += _simulator_lines(s)
     p = s.part
     if p.x is None and p.mode is None:
         lines.append('part       no particle/pose or particle/contact_state in this log')
@@ -141,5 +174,26 @@ def format_summary(s: LogSummary) -> str:
         where = (f'x = {p.x * 1e3:.4f} mm, z = {p.z * 1e6:.3f} µm at t = {p.stamp:.4f} s'
                  if p.x is not None else 'no pose')
         lines.append(f'part       {where}; mode {p.mode or "unknown"}')
+        if p.x is not None and p.first_x is not None:
+            lines.append(f'           moved {(p.x - p.first_x) * 1e6:+.3f} µm since t = {p.first_stamp:.4f} s')
     lines += _loss_lines(s)
     return '\n'.join(lines)
+
+
+def _simulator_lines(s: LogSummary) -> list[str]:
+    """Sim time span (pose stamps) with the achieved real-time factor, and how the simulator was driven."""
+    lines = []
+    p = s.part
+    if p.stamp is not None and p.first_stamp is not None:
+        span = p.stamp - p.first_stamp
+        stepped = s.simulator.mode == 'stepped'
+        rtf = f', {span / s.duration:.2f} × real time' if s.duration > 0 and span > 0 and not stepped else ''
+        lines.append(f'sim time   {p.first_stamp:.6f} – {p.stamp:.6f} s (particle/pose stamps{rtf})')
+    run = s.simulator
+    if run.mode != 'unknown':
+        how = {'stepped': f'stepped through simulator/step, {run.step_period:g} s per step',
+               'real time': f'real time × {run.real_time_factor:g}',
+               'as fast as possible': f'as fast as possible, {run.step_period:g} s per step'}[run.mode]
+        n = run.commands_received
+        lines.append(f'simulator  {how}; {n} command{"s" * (n != 1)} received')
+    return lines

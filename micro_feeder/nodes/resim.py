@@ -37,6 +37,7 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from ..logs.reader import LogMessage, LogReader
+from ..logs.sim_parameters import recorded_parameters, run_mode
 from ..physics.dynamics import SimulationError
 from .commands import CommandRejected, joint_names, parse_setpoints, parse_trajectory
 from .parameters import model_specs
@@ -44,12 +45,6 @@ from .stepper import Stepper, build_model
 
 COMMAND_TOPICS = ('actuator/trajectory', 'actuator/command')
 MAX_INTERMEDIATE_STEPS = 1_000_000  # unrecorded steps rebuilt between two recorded poses, at most
-
-# rcl_interfaces/ParameterValue: type code -> field holding the value.
-_VALUE_FIELDS = {1: 'bool_value', 2: 'integer_value', 3: 'double_value', 4: 'string_value',
-                 5: 'byte_array_value', 6: 'bool_array_value', 7: 'integer_array_value',
-                 8: 'double_array_value', 9: 'string_array_value'}
-
 
 class ResimError(ValueError):
     """The log cannot be re-simulated (no poses, parameters that build no model ...); says why."""
@@ -98,29 +93,6 @@ class ResimReport:
         where = f' at t = {self.t_max_error:.6f} s' if self.t_max_error is not None else ''
         return (f'resim: DIFFERENT: largest difference {self.max_error:.3e} m{where} (max |dx| {self.max_dx:.3e} m, '
                 f'max |dz| {self.max_dz:.3e} m; {what})')
-
-
-def parameter_value(value: Any) -> Any:
-    """A decoded ``rcl_interfaces/ParameterValue`` as a Python value (arrays as lists)."""
-    name = _VALUE_FIELDS.get(value.type)
-    if name is None:
-        raise ResimError(f'parameter value of unknown type {value.type}')
-    v = getattr(value, name)
-    return list(v) if isinstance(v, (list, tuple, bytes)) or hasattr(v, 'tolist') else v
-
-
-def recorded_parameters(log: LogReader) -> list[dict[str, Any]]:
-    """Every ``simulator/parameters`` snapshot of the log, in log order, as ``{name: value}``."""
-    return [{p.name: parameter_value(p.value) for p in m.message.new_parameters}
-            for m in log.messages(['simulator/parameters'])]
-
-
-def _run_mode(params: Mapping[str, Any] | None) -> str:
-    if params is None:
-        return 'unknown'
-    if params.get('start_paused'):
-        return 'stepped'
-    return 'as fast as possible' if params.get('real_time_factor') == 0 else 'real time'
 
 
 @dataclass
@@ -254,7 +226,10 @@ def resimulate(log: LogReader, overrides: Mapping[str, Any] | None = None) -> Re
     """
     overrides = dict(overrides or {})
     notes: list[str] = []
-    snapshots = recorded_parameters(log)
+    try:
+        snapshots = recorded_parameters(log)
+    except ValueError as err:
+        raise ResimError(f'simulator/parameters unreadable: {err}') from err
     specs = model_specs()
     if snapshots:
         first = snapshots[0]
@@ -293,7 +268,7 @@ def resimulate(log: LogReader, overrides: Mapping[str, Any] | None = None) -> Re
                      'late): earlier stops unknown, started from t = 0')
 
     stepper = Stepper(model)
-    report = ResimReport(str(log.path), _run_mode(first), source, overrides, 0, 0.0, 0.0, 0.0, 0.0, None, 0, 0,
+    report = ResimReport(str(log.path), run_mode(first), source, overrides, 0, 0.0, 0.0, 0.0, 0.0, None, 0, 0,
                          exact, receipts, notes)
     pending: Iterator[_Command] = iter(sorted(commands, key=lambda c: c.receipt_ns))  # stable: receipt order
     next_cmd = next(pending, None)
