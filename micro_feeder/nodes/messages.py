@@ -43,38 +43,47 @@ def tilt_quaternion(theta: float) -> tuple[float, float, float, float]:
     return 0.0, math.sin(-theta / 2.0), 0.0, math.cos(-theta / 2.0)
 
 
-def pose(obs: Observation, stamp: Time) -> PoseStamped:
-    """The part's position (x, 0, z) (m) in ``feeder`` with the contact-frame tilt as orientation."""
-    msg = PoseStamped(header=Header(stamp=stamp, frame_id=FEEDER_FRAME))
-    msg.pose.position.x, msg.pose.position.z = obs.x, obs.z
-    q = msg.pose.orientation
-    q.x, q.y, q.z, q.w = tilt_quaternion(obs.theta)
-    return msg
+class StateMessages:
+    """The state messages published every tick, allocated once and updated in place.
 
+    Building five messages per tick (nested Header/Time/Point... constructors) was a third of the
+    simulator's Python time at 1 kHz; rclpy serialises a message inside ``publish``, so reusing the same
+    objects is safe.
 
-def twist(obs: Observation, stamp: Time) -> TwistStamped:
-    """The part's velocity (ẋ, 0, ż) (m/s) in ``feeder``; angular velocity 0 (a point mass)."""
-    msg = TwistStamped(header=Header(stamp=stamp, frame_id=FEEDER_FRAME))
-    msg.twist.linear.x, msg.twist.linear.z = obs.xdot, obs.zdot
-    return msg
+    * ``pose``: the part's position (x, 0, z) (m) in ``feeder`` with the contact-frame tilt as orientation;
+    * ``twist``: its velocity (ẋ, 0, ż) (m/s) in ``feeder``; angular velocity 0 (a point mass);
+    * ``wrench``: the force on the part from the surface in ``contact``: x = friction T (N), z = normal load
+      N (N; > 0 presses, < 0 adhesion holding; in flight −F_att, the attraction); torque 0;
+    * ``joints``: actual strokes (m) and stroke velocities (m/s) per actuator;
+    * ``clock``: the sim time.
+    """
 
+    def __init__(self, joint_names: Sequence[str]):
+        self.pose = PoseStamped(header=Header(frame_id=FEEDER_FRAME))
+        self.twist = TwistStamped(header=Header(frame_id=FEEDER_FRAME))
+        self.wrench = WrenchStamped(header=Header(frame_id=CONTACT_FRAME))
+        self.joints = JointState(header=Header(frame_id=FEEDER_FRAME), name=list(joint_names))
+        self.clock = Clock()
+        self._stamps = [m.header.stamp for m in (self.pose, self.twist, self.wrench, self.joints)]
+        self._stamps.append(self.clock.clock)
 
-def contact_wrench(obs: Observation, stamp: Time) -> WrenchStamped:
-    """Force on the part from the surface in ``contact``: x = friction T (N), z = normal load N (N; > 0
-    presses, < 0 adhesion holding; in flight −F_att, the attraction). Torque 0."""
-    msg = WrenchStamped(header=Header(stamp=stamp, frame_id=CONTACT_FRAME))
-    msg.wrench.force.x, msg.wrench.force.z = obs.friction, obs.normal_load
-    return msg
-
-
-def joint_state(names: Sequence[str], positions: np.ndarray, velocities: np.ndarray, stamp: Time) -> JointState:
-    """Actual strokes (m) and stroke velocities (m/s) per actuator."""
-    return JointState(header=Header(stamp=stamp, frame_id=FEEDER_FRAME), name=list(names),
-                      position=[float(v) for v in positions], velocity=[float(v) for v in velocities])
-
-
-def clock(stamp: Time) -> Clock:
-    return Clock(clock=stamp)
+    def update(self, obs: Observation, stroke_velocities: np.ndarray) -> Time:
+        """Fill every message from ``obs`` at its sim time; returns that time as a ROS Time."""
+        ns = round(obs.t * 1e9)
+        sec, nanosec = ns // 1_000_000_000, ns % 1_000_000_000
+        for stamp in self._stamps:
+            stamp.sec, stamp.nanosec = sec, nanosec
+        position = self.pose.pose.position
+        position.x, position.z = obs.x, obs.z
+        q = self.pose.pose.orientation
+        q.x, q.y, q.z, q.w = tilt_quaternion(obs.theta)
+        linear = self.twist.twist.linear
+        linear.x, linear.z = obs.xdot, obs.zdot
+        force = self.wrench.wrench.force
+        force.x, force.z = obs.friction, obs.normal_load
+        self.joints.position = obs.strokes.tolist()
+        self.joints.velocity = np.asarray(stroke_velocities, dtype=float).tolist()
+        return self.clock.clock
 
 
 def surface_markers(obs: Observation, xs: np.ndarray, centers: Sequence[float], widths: Sequence[float],

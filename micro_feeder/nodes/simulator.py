@@ -129,7 +129,7 @@ class Simulator(Node):
         self._last_markers = -float('inf')
         self._window = (time.perf_counter(), self._stepper.t)
         self.achieved_rtf = 0.0
-        self._configure_surface_points()
+        self._configure_outputs()
         self._publish_parameters()
         self._publish_state([])
         self.create_timer(self._period, self._tick, clock=steady)
@@ -185,18 +185,18 @@ class Simulator(Node):
 
     def _publish_state(self, events: list[Event]) -> None:
         obs = self._stepper.observe()
-        stamp = messages.to_time(obs.t)
-        self._pub_pose.publish(messages.pose(obs, stamp))
-        self._pub_twist.publish(messages.twist(obs, stamp))
-        self._pub_wrench.publish(messages.contact_wrench(obs, stamp))
-        self._pub_joints.publish(messages.joint_state(self.joints, obs.strokes,
-                                                      self._stepper.stroke_velocities(), stamp))
+        state = self._state_messages
+        stamp = state.update(obs, self._stepper.stroke_velocities())
+        self._pub_pose.publish(state.pose)
+        self._pub_twist.publish(state.twist)
+        self._pub_wrench.publish(state.wrench)
+        self._pub_joints.publish(state.joints)
         for event in events:
             if event.kind != 'reversal':
                 self._publish_mode(event.to_mode)
         self._publish_mode(obs.mode)
         if self._pub_clock is not None:
-            self._pub_clock.publish(messages.clock(stamp))
+            self._pub_clock.publish(state.clock)
         now = time.perf_counter()
         if now - self._last_markers >= self._markers_period:
             self._last_markers = now
@@ -209,7 +209,9 @@ class Simulator(Node):
             self._mode = mode
             self._pub_mode.publish(String(data=mode))
 
-    def _configure_surface_points(self) -> None:
+    def _configure_outputs(self) -> None:
+        """Per-model output buffers: the state messages (one joint per actuator) and the marker abscissae."""
+        self._state_messages = messages.StateMessages(self.joints)
         surface = self._stepper.model.surface
         c, w = np.asarray(surface.centers), np.asarray(surface.widths)
         self._marker_xs = np.linspace(float(np.min(c - 4 * w)), float(np.max(c + 4 * w)), MARKER_POINTS)
@@ -254,7 +256,7 @@ class Simulator(Node):
         self._model_pending = False
         self.error = ''
         self._mode = ''
-        self._configure_surface_points()
+        self._configure_outputs()
         self._window = (time.perf_counter(), 0.0)
         self._publish_parameters()
         self._publish_state([])
