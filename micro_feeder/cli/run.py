@@ -8,14 +8,13 @@ summary to stdout at the end. Ctrl-C (or SIGTERM) ends the run cleanly, the log 
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from typing import Any, TextIO
 
-from ..physics.parameters import ParameterError
 from . import CommandError
 from ._common import add_model_options, settings_from_args
+from ._session import ros_session
 
 STATUS_PERIOD = 0.2   # s (wall clock) between two status line updates
 
@@ -64,50 +63,20 @@ def run(args: argparse.Namespace) -> int:
     flat = settings_from_args(args)
     if args.duration is not None and not args.duration > 0:
         raise CommandError('--duration must be > 0')
-    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    import rclpy  # after the environment is set: rcl reads it at init
-    from rclpy.context import Context
-    from rclpy.parameter import Parameter
-    from rclpy.signals import SignalHandlerOptions
+    with ros_session(args.record) as session:
+        from ..nodes.actuator import Actuator
+        from ..nodes.simulator import Simulator
 
-    from ..nodes._ros import StopFlag
-    from ..nodes.actuator import Actuator
-    from ..nodes.simulator import Simulator
-    from ..nodes.spin import spin_nodes
-
-    context = Context()
-    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
-    stop = StopFlag().install()
-    nodes: list[Any] = []
-    recorder = None
-    try:
-        try:
-            if args.record:
-                from ..nodes.recorder import Recorder
-                recorder = Recorder(context=context, parameter_overrides=[Parameter('output', value=args.record)])
-                nodes.append(recorder)
-            sim = Simulator(context=context, overrides={**flat, 'real_time_factor': args.real_time_factor})
-            nodes.append(sim)
-            actuator = Actuator(context=context, overrides=flat)
-            nodes.append(actuator)
-        except (ParameterError, ValueError, FileExistsError) as err:
-            raise CommandError(str(err)) from err
+        sim = session.add(lambda: Simulator(context=session.context,
+                                            overrides={**flat, 'real_time_factor': args.real_time_factor}))
+        actuator = session.add(lambda: Actuator(context=session.context, overrides=flat))
         tty: TextIO | None = sys.stderr if sys.stderr.isatty() else None
         if tty is not None:
             sim.create_timer(STATUS_PERIOD, lambda: print('\r' + status_line(sim), end='', file=tty, flush=True))
         start = time.perf_counter()
-        spin_nodes(nodes, lambda: bool(stop) or bool(sim.error) or (
-            args.duration is not None and sim.stepper.t >= args.duration), context)
+        session.spin(lambda: bool(sim.error) or (args.duration is not None and sim.stepper.t >= args.duration))
         wall = time.perf_counter() - start
         if tty is not None:
             print('\r' + status_line(sim), file=tty)
-        log = str(recorder.close()) if recorder is not None else None
-        recorder = None
-        print(summary(sim, actuator, wall, log))
+        print(summary(sim, actuator, wall, session.close_log()))
         return 1 if sim.error else 0
-    finally:
-        if recorder is not None:
-            recorder.close()
-        for node in nodes:
-            node.destroy_node()
-        rclpy.shutdown(context=context)

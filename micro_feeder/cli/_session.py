@@ -1,0 +1,75 @@
+"""Several nodes in one process for a CLI command: a private rclpy context, Ctrl-C/SIGTERM handling, an
+optional recorder, one EventsExecutor spun on the main thread, and a clean shutdown whatever happens."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+from collections.abc import Callable, Iterator
+from typing import Any, TypeVar
+
+from ..physics.parameters import ParameterError
+from . import CommandError
+
+N = TypeVar('N')
+
+
+class RosSession:
+    """What a command builds its nodes with; see :func:`ros_session`."""
+
+    def __init__(self, context: Any, stop: Any, record: str | None):
+        self.context = context
+        self.stop = stop
+        self.nodes: list[Any] = []
+        self.recorder = None
+        self.log: str | None = None
+        if record:
+            from rclpy.parameter import Parameter
+
+            from ..nodes.recorder import Recorder
+            self.recorder = self.add(lambda: Recorder(context=context,
+                                                      parameter_overrides=[Parameter('output', value=record)]))
+
+    def add(self, build: Callable[[], N]) -> N:
+        """Build a node (a refused parameter becomes a :class:`CommandError`) and include it in the spin."""
+        try:
+            node = build()
+        except (ParameterError, ValueError, FileExistsError) as err:
+            raise CommandError(str(err)) from err
+        self.nodes.append(node)
+        return node
+
+    def spin(self, done: Callable[[], bool]) -> None:
+        """Spin every node until ``done()`` or Ctrl-C/SIGTERM."""
+        from ..nodes.spin import spin_nodes
+        spin_nodes(self.nodes, lambda: bool(self.stop) or done(), self.context)
+
+    def close_log(self) -> str | None:
+        """Finish the recording (summary, metadata.yaml); returns its path."""
+        if self.recorder is not None and self.log is None:
+            self.log = str(self.recorder.close())
+        return self.log
+
+
+@contextlib.contextmanager
+def ros_session(record: str | None = None) -> Iterator[RosSession]:
+    """A :class:`RosSession`; ROS traffic stays on this host unless ROS_AUTOMATIC_DISCOVERY_RANGE is set."""
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    import rclpy  # after the environment is set: rcl reads it at init
+    from rclpy.context import Context
+    from rclpy.signals import SignalHandlerOptions
+
+    from ..nodes._ros import StopFlag
+
+    context = Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    session = None
+    try:
+        session = RosSession(context, StopFlag().install(), record)
+        yield session
+    finally:
+        if session is not None:
+            session.close_log()
+            for node in session.nodes:
+                node.destroy_node()
+        rclpy.shutdown(context=context)
