@@ -56,6 +56,9 @@ N_SCRATCH = 11
 DP_C = (0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0)
 DP_B = (35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84)
 DP_E = (71 / 57600, 0.0, -71 / 16695, 71 / 1920, -17253 / 339200, 22 / 525, -1 / 40)
+# Dense output (Hairer & Wanner's DOPRI5 continuous extension, 4th order): weights of k1, k3..k7.
+DP_D = (-12715105075 / 11282082432, 87487479700 / 32700410799, -10690763975 / 1880347072,
+        701980252875 / 199316789632, -1453857185 / 822651844, 69997945 / 29380423)
 
 # aux: quantities of the last evaluation
 (AUX_N, AUX_T_REQ, AUX_QMAX, AUX_L, AUX_H, AUX_HX, AUX_HT, AUX_GAP, AUX_XS, AUX_LOAD_INDEX,
@@ -293,6 +296,19 @@ def dopri5_error(h: float, f0: np.ndarray, work: np.ndarray, f1: np.ndarray, tol
 
 
 @jit_inline
+def dopri5_dense(theta: float, h: float, y0: np.ndarray, f0: np.ndarray, y1: np.ndarray, f1: np.ndarray,
+                 work: np.ndarray, out: np.ndarray) -> None:
+    """DOPRI5's own 4th-order interpolant of the last :func:`dopri5_step` (stages in ``work[1:5]``)."""
+    for i in range(y0.size):
+        r2 = y1[i] - y0[i]
+        r3 = h * f0[i] - r2
+        r4 = r2 - h * f1[i] - r3
+        r5 = h * (DP_D[0] * f0[i] + DP_D[1] * work[1, i] + DP_D[2] * work[2, i] + DP_D[3] * work[3, i]
+                  + DP_D[4] * work[4, i] + DP_D[5] * f1[i])
+        out[i] = y0[i] + theta * (r2 + (1.0 - theta) * (r3 + theta * (r4 + (1.0 - theta) * r5)))
+
+
+@jit_inline
 def hermite(theta: float, h: float, y0: np.ndarray, f0: np.ndarray, y1: np.ndarray, f1: np.ndarray,
             out: np.ndarray) -> None:
     """Cubic Hermite interpolant of a step at fraction ``theta`` (dense output, 4th-order accurate)."""
@@ -307,8 +323,9 @@ def hermite(theta: float, h: float, y0: np.ndarray, f0: np.ndarray, y1: np.ndarr
 def locate_root(which: int, mode: int, direction: int, t: float, h: float, y0: np.ndarray,
                 f0: np.ndarray, y1: np.ndarray, f1: np.ndarray, g_start: float, g_end: float,
                 model: tuple, src: tuple, cur: np.ndarray, st: np.ndarray, aux: np.ndarray,
-                work: np.ndarray) -> float:
-    """Step fraction at which margin ``which`` (0 or 1) first reaches 0 on the step's interpolant.
+                work: np.ndarray, dense: bool) -> float:
+    """Step fraction at which margin ``which`` (0 or 1) first reaches 0 on the step's interpolant
+    (``dense``: the Dormand-Prince interpolant of the step just taken; else cubic Hermite).
 
     Illinois regula falsi, with bisection while the left end is not strictly positive (a margin that
     is 0 by construction at the start of a fresh mode). Returns the right end of the final bracket
@@ -330,7 +347,10 @@ def locate_root(which: int, mode: int, direction: int, t: float, h: float, y0: n
             theta = min(max(theta, a + 0.25 * tol), b - 0.25 * tol)
         else:
             theta = 0.5 * (a + b)
-        hermite(theta, h, y0, f0, y1, f1, yi)
+        if dense:
+            dopri5_dense(theta, h, y0, f0, y1, f1, work, yi)
+        else:
+            hermite(theta, h, y0, f0, y1, f1, yi)
         if mode == SLIDING and which == 0:  # the slide margin dir·ẋ needs no force evaluation
             g = direction * yi[1]
         else:
@@ -600,33 +620,37 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
             theta = 2.0
             if hit0:
                 theta = locate_root(0, mode, direction, t, h, y, f0, y1, f1, g0, e0, model, src, cur,
-                                    st, aux, work)
+                                    st, aux, work, adaptive and moving)
                 which = 0
             if hit1:
                 theta1 = locate_root(1, mode, direction, t, h, y, f0, y1, f1, g1, e1, model, src, cur,
-                                     st, aux, work)
+                                     st, aux, work, adaptive and moving)
                 if theta1 < 0.0 or (theta >= 0.0 and theta1 < theta):
                     theta, which = theta1, 1
             if theta < 0.0:
                 status = EVENT_NOT_LOCATED
                 break
-            slope = aux[AUX_ROOT_SLOPE]
-            for attempt in range(2):        # step to the root; once more if the true margin disagrees
-                if not moving:
-                    copy_into(y1, y)
-                elif adaptive:
-                    dopri5_step(mode, direction, t, y, f0, theta * h, model, src, cur, st, aux, work, y1)
-                else:
+            if not moving:
+                copy_into(y1, y)
+            elif adaptive and mode == SLIDING and which == 0:
+                dopri5_dense(theta, h, y, f0, y1, f1, work, work[9])   # a slide's end: the state on the
+                copy_into(y1, work[9])                                 # interpolant of the root
+            elif adaptive:                      # take-off, landing: a full step to the root, as the
+                dopri5_step(mode, direction, t, y, f0, theta * h, model, src, cur, st, aux, work, y1)
+            else:                               # flight is sensitive to them; RK4: step to the root, once
+                slope = aux[AUX_ROOT_SLOPE]     # more if the true margin disagrees with Hermite's root
+                for attempt in range(2):
                     rk4_step(mode, direction, t, y, f0, theta * h, model, src, cur, st, aux, work, y1)
-                if attempt == 1 or not moving or slope >= 0.0:
-                    break
-                if mode == SLIDING and which == 0:
-                    g_true = direction * y1[1]
-                else:
-                    g_true = evaluate(mode, direction, t + theta * h, y1, model, src, cur, st, aux, f1)[which]
-                if abs(g_true) <= -slope * tol:   # the interpolant's root is the solution's root
-                    break
-                theta = min(max(theta - g_true / (slope * h), tol / h), 1.0)
+                    if attempt == 1 or slope >= 0.0:
+                        break
+                    if mode == SLIDING and which == 0:
+                        g_true = direction * y1[1]
+                    else:
+                        g_true = evaluate(mode, direction, t + theta * h, y1, model, src, cur, st, aux,
+                                          f1)[which]
+                    if abs(g_true) <= -slope * tol:
+                        break
+                    theta = min(max(theta - g_true / (slope * h), tol / h), 1.0)
             t += theta * h
             copy_into(y, y1)
             fs[FS_MAX_SPEED] = max(fs[FS_MAX_SPEED], abs(y[1]))
