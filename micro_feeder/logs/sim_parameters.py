@@ -35,10 +35,13 @@ def recorded_parameters(log: LogReader) -> list[dict[str, Any]]:
 
 
 def run_mode(params: Mapping[str, Any] | None) -> str:
-    """How the simulator was driven: 'stepped' (start_paused, simulator/step), 'as fast as possible'
-    (real_time_factor 0), 'real time' (any other factor), or 'unknown' without parameters."""
+    """How the simulator was driven: 'lockstep' (one step per simulator/step call and per command),
+    'stepped' (start_paused, simulator/step), 'as fast as possible' (real_time_factor 0), 'real time'
+    (any other factor), or 'unknown' without parameters."""
     if params is None:
         return 'unknown'
+    if params.get('lockstep'):
+        return 'lockstep'
     if params.get('start_paused'):
         return 'stepped'
     return 'as fast as possible' if params.get('real_time_factor') == 0 else 'real time'

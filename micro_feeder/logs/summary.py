@@ -192,8 +192,9 @@ def _simulator_lines(s: LogSummary) -> list[str]:
     run = s.simulator
     if run.mode != 'unknown':
         how = {'stepped': f'stepped through simulator/step, {run.step_period:g} s per step',
+               'lockstep': f'lockstep, {run.step_period:g} s per simulator/step call or command',
                'real time': f'real time × {run.real_time_factor:g}',
-               'as fast as possible': f'as fast as possible, {run.step_period:g} s per step'}[run.mode]
+               'as fast as possible': f'as fast as possible, {run.step_period:g} s per step'}.get(run.mode, run.mode)
         n = run.commands_received
         lines.append(f'simulator  {how}; {n} command{"s" * (n != 1)} received')
     return lines
