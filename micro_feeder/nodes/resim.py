@@ -30,6 +30,7 @@ checks; it needs no rclpy and no running ROS graph, only the message packages th
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections import defaultdict
 from collections.abc import Iterator, Mapping
@@ -198,11 +199,13 @@ def _commands(log: LogReader, pose_log: list[tuple[int, int]], notes: list[str])
 
 def _estimated(recorded: dict[str, list[LogMessage]], pose_log: list[tuple[int, int]]) -> list[_Command]:
     """Receipt times for a log without receipts: the stamp of the last pose logged before each command."""
+    pose_log = sorted(pose_log)
+    log_times = [log_ns for log_ns, _ in pose_log]
     out = []
     for topic, msgs in recorded.items():
         for m in msgs:
-            before = [stamp for log_ns, stamp in pose_log if log_ns <= m.log_time_ns]
-            out.append((m.log_time_ns, _Command(before[-1] if before else 0, topic, m.message)))
+            i = bisect.bisect_right(log_times, m.log_time_ns)
+            out.append((m.log_time_ns, _Command(pose_log[i - 1][1] if i else 0, topic, m.message)))
     return [c for _, c in sorted(out, key=lambda pair: pair[0])]
 
 
