@@ -1,6 +1,8 @@
 """FeedPlanner against synthetic plants (closed-form displacement per stroke) and in closed loop with the
 real offline dynamics."""
 
+from pathlib import Path
+
 import pytest
 
 from micro_feeder.control.feed_planner import Burst, FeedGoal, FeedPlanner
@@ -71,24 +73,34 @@ def test_goal_validation_names_the_parameter():
         FeedGoal(tolerance=0.0)
 
 
-def fire_offline(model, state, burst: Burst, settle_s: float = 3e-3) -> None:
+def fire_offline(model, state, burst: Burst, pause_s: float, settle_s: float = 3e-3) -> None:
     """Fire ``burst`` from the state's time on the real dynamics and let the part settle."""
-    stroke = model.stroke.replace(amplitude=burst.amplitude_m, count=burst.count, delay=state.t)
+    phases = tuple(reversed(model.stroke.phases)) if burst.reversed_wave else model.stroke.phases
+    stroke = model.stroke.replace(amplitude=burst.amplitude_m, count=burst.count, delay=state.t, pause=pause_s,
+                                  phases=phases)
     fired = model.replace(stroke=stroke)
     model.advance(state, stroke.burst_end_s() + settle_s, source=fired.waveform())
 
 
-@pytest.mark.parametrize('target_x', [0.46e-3, 0.3e-3])
-def test_closed_loop_on_the_offline_dynamics(target_x):
-    """The planner feeds the part to the target on the real physics (default scenario)."""
-    from micro_feeder.physics.dynamics import FeederModel
+TRAVELLING_WAVE = Path(__file__).parents[1] / 'config' / 'travelling_wave.yaml'
 
-    model = FeederModel.from_settings({})
+
+@pytest.mark.parametrize(('scenario', 'target_x'), [('single', 0.46e-3), ('single', 0.3e-3),
+                                                    ('wave', 0.8e-3), ('wave', 0.9e-3), ('wave', 1.2e-3)])
+def test_closed_loop_on_the_offline_dynamics(scenario, target_x):
+    """The planner feeds the part to the target on the real physics: the default single actuator (toward the
+    bump centre) and config/travelling_wave.yaml (both ways)."""
+    from micro_feeder.physics.dynamics import FeederModel
+    from micro_feeder.settings import load_settings
+
+    flat = load_settings([TRAVELLING_WAVE] if scenario == 'wave' else [], [f'feed.target_x={target_x}'])
+    model = FeederModel.from_settings(flat)
     state = model.initial_state()
-    planner = FeedPlanner(FeedGoal(target_x=target_x, tolerance=1e-6))
+    goal = FeedGoal.from_flat(flat)
+    planner = FeedPlanner(goal, travelling_wave=scenario == 'wave')
     while (burst := planner.next_burst(state.x)) is not None:
         x_before = state.x
-        fire_offline(model, state, burst)
+        fire_offline(model, state, burst, goal.stroke_pause)
         assert state.mode == 'stuck'
         planner.observe(burst, x_before, state.x)
     assert planner.status == 'reached', planner.reason

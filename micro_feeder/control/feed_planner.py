@@ -9,8 +9,11 @@ The planner knows nothing of the physics: it learns the displacement per stroke 
 * when one stroke would overshoot by more than the tolerance, a smaller amplitude (the displacement grows
   steeply with amplitude above the sliding threshold, so it is scaled by the cube root of the ratio);
 * when strokes do not move the part, a larger amplitude, up to ``amplitude_max``;
-* when the part moves away from the target, the travelling wave is reversed if there is one; with a single
-  actuator (which only draws the part toward its bump) the goal is reported unreachable.
+* when the part moves away from the target (or overshoots it), the travelling wave is reversed if there is
+  one, and when both directions have just moved it the wrong way the amplitude goes up (at small amplitudes
+  a wave's direction depends on where the part sits); with a single actuator (which only draws the part
+  toward its bump) the goal is then unreachable;
+* after FUTILE_LIMIT bursts in a row that bring the part no closer, it gives up.
 
 It is pure Python (no rclpy), so the same logic runs in the ROS node and in offline closed-loop tests.
 """
@@ -24,7 +27,7 @@ from ..physics.parameters import ParameterError, ParameterGroup, param
 AMPLITUDE_STEP_UP = 1.25      # amplitude factor after a burst that did not move the part
 MIN_AMPLITUDE_FACTOR = 0.5    # never shrink the amplitude by more than this in one decision
 STALL_LIMIT = 3               # bursts at the largest amplitude without motion before giving up
-MAX_REVERSALS = 4             # travelling-wave direction changes before giving up
+FUTILE_LIMIT = 10             # consecutive bursts that bring the part no closer before giving up
 COUNT_SAFETY = 0.8            # fire this fraction of the strokes that would fit: the gain varies along the bump
 NO_MOTION_FRACTION = 1e-3     # a displacement below this fraction of the tolerance counts as no motion
 
@@ -42,6 +45,9 @@ class FeedGoal(ParameterGroup):
     amplitude_max: float = param(150e-6, 'largest stroke amplitude the controller uses', 'm', gt=0)
     max_count: int = param(20, 'most strokes in one burst', ge=1)
     max_bursts: int = param(200, 'bursts before the controller gives up', ge=1)
+    stroke_pause: float = param(1e-3, 'rest between the strokes of a burst: each stroke then starts with the part '
+                                'at rest and displacements add up (back-to-back strokes of a travelling wave '
+                                'nearly cancel)', 's', ge=0, le=1.0)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -78,7 +84,8 @@ class FeedPlanner:
     _per_stroke: float | None = field(default=None, init=False)
     _reversed: bool = field(default=False, init=False)
     _stalled: int = field(default=0, init=False)
-    _reversals: int = field(default=0, init=False)
+    _wrong_way: int = field(default=0, init=False)
+    _futile: int = field(default=0, init=False)
 
     def __post_init__(self) -> None:
         self._amplitude = self.goal.amplitude_start
@@ -98,13 +105,14 @@ class FeedPlanner:
         if self.bursts >= self.goal.max_bursts:
             return self._give_up(f'not within tolerance after {self.bursts} bursts')
         if self._per_stroke is not None and self._per_stroke * error < 0:
-            if not self.travelling_wave or self._reversals >= MAX_REVERSALS:
+            if not self.travelling_wave:
                 return self._give_up('the strokes move the part away from the target: one actuator only '
                                      'draws the part toward its bump centre (several actuators make a '
                                      'travelling wave that can go both ways)')
+            if self._wrong_way >= 2:
+                self._amplitude = min(self._amplitude * AMPLITUDE_STEP_UP, self.goal.amplitude_max)
             self._reversed = not self._reversed
-            self._reversals += 1
-            self._per_stroke = -self._per_stroke
+            self._per_stroke = None
         count = 1
         if self._per_stroke is not None:
             per_stroke = abs(self._per_stroke)
@@ -120,6 +128,12 @@ class FeedPlanner:
         self.bursts += 1
         self.strokes += burst.count
         moved = x_after - x_before
+        closer = abs(self.error(x_after)) < abs(self.error(x_before))
+        self._futile = 0 if closer else self._futile + 1
+        if self._futile >= FUTILE_LIMIT:
+            self._give_up(f'{FUTILE_LIMIT} bursts in a row brought the part no closer to the target')
+            return
+        self._wrong_way = self._wrong_way + 1 if moved * self.error(x_before) < 0 else 0
         if abs(moved) >= NO_MOTION_FRACTION * self.goal.tolerance:
             self._stalled = 0
             self._per_stroke = moved / burst.count
