@@ -43,6 +43,7 @@ setup(
             'simulator = micro_feeder.nodes.simulator:main',
             'recorder = micro_feeder.nodes.recorder:main',
             'replay = micro_feeder.nodes.replay:main',
+            'feed_controller = micro_feeder.nodes.feed_controller:main',
         ],
     },
 )

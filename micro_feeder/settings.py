@@ -15,13 +15,17 @@ from typing import Any
 
 import yaml
 
+from .control.feed_planner import FeedGoal
 from .physics.contact.params import ContactParams
 from .physics.dynamics.params import dynamics_parameter_groups
 from .physics.parameters import ParameterError, ParameterGroup, ParamSpec, all_specs
 from .physics.particle import ParticleParams
 
-# Every group in the shared namespace; later layers append theirs here.
+# The model's parameter groups: the simulator declares these as ROS parameters.
 PARAMETER_GROUPS: list[type[ParameterGroup]] = [ContactParams, ParticleParams, *dynamics_parameter_groups()]
+# Parameters of the example feed controller (``feed.*``): known to --set and parameters files, but not model
+# parameters, so the simulator does not declare them.
+CONTROLLER_GROUPS: list[type[ParameterGroup]] = [FeedGoal]
 
 
 # Sections of a ROS 2 parameters file that hold model parameters, merged in this order.
@@ -49,7 +53,7 @@ class SettingsError(ValueError):
 
 def known_parameters() -> dict[str, tuple[ParamSpec, Any]]:
     """``{dotted name: (spec, default)}`` for every model parameter."""
-    return all_specs(PARAMETER_GROUPS)
+    return all_specs([*PARAMETER_GROUPS, *CONTROLLER_GROUPS])
 
 
 def flatten(tree: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:

@@ -1,0 +1,211 @@
+"""The ``feed_controller`` example node: feeds the part to ``feed.target_x`` by firing stroke bursts.
+
+It is a controller under test, as a lab would write one: it sees only the simulator's topics
+(``particle/pose``, ``particle/twist``) and commands ``actuator/trajectory``, using sim time. Whenever the
+part rests (ẋ = ż = 0 on a still surface, at least ``settle_time`` after the last burst ended) it asks the
+:class:`~micro_feeder.control.feed_planner.FeedPlanner` for the next burst, until the part rests within
+``feed.tolerance`` of the target. The outcome goes on the latched ``feed_controller/status`` and on
+``/diagnostics``.
+
+Decisions use only a pose and a twist with the same stamp, so they depend on the sim state alone and not
+on which topic arrived first. With ``lockstep`` the node is also the simulator's clock master: after
+deciding on the state at t it grants the next ``step_period`` (a trajectory it sends counts as the grant,
+otherwise it calls ``simulator/step``), and never waits for sim time it has not granted.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from typing import Any
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from geometry_msgs.msg import PoseStamped, TwistStamped
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Header, String
+from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory
+
+from ..control.feed_planner import Burst, FeedGoal, FeedPlanner
+from ..physics.parameters import ParamSpec
+from ..physics.waveforms import StrokeParams
+from . import messages
+from .actuator import sample_waveform
+from .commands import joint_names
+from .parameters import declare, model_specs, values
+from .simulator import topic_qos
+from .spin import spin_node
+
+NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
+    'settle_time': (ParamSpec('sim time to wait after a burst ends before judging where the part rests', 's',
+                              gt=0, le=1.0, read_only=True), 3e-3),
+    'lockstep': (ParamSpec('drive the simulator in lockstep: grant one step after each decision',
+                           kind='bool', read_only=True), False),
+    'knots_per_stroke': (ParamSpec('trajectory knots per stroke period', kind='int', ge=2, le=10000,
+                                   read_only=True), 40),
+    'command_lead': (ParamSpec('real-time mode: a burst is stamped to start this long after the state it was '
+                               'decided on; it must exceed the command latency, which includes working off a '
+                               'backlog of state messages and sampling a long burst (up to ~20 ms measured '
+                               'with the simulator in the same process); a late burst starts mid-stroke',
+                               's', ge=0, le=1.0, read_only=True), 0.05),
+}
+STATUS_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+
+
+def stamp_s(stamp: Time) -> float:
+    return stamp.sec + stamp.nanosec * 1e-9
+
+
+class FeedController(Node):
+    """Feed-to-target controller: see the module docstring and docs/hil.md."""
+
+    def __init__(self, overrides: Mapping[str, Any] | None = None, **kwargs: Any):
+        kwargs.setdefault('parameter_overrides', [Parameter('use_sim_time', value=True)])
+        super().__init__('feed_controller', **kwargs)
+        self._goal_specs = model_specs([FeedGoal])
+        self._stroke_specs = model_specs([StrokeParams])
+        declare(self, {**self._goal_specs, **self._stroke_specs, **NODE_SPECS}, overrides)
+        self.goal = FeedGoal.from_flat(values(self, self._goal_specs))
+        self.stroke = StrokeParams.from_flat(values(self, self._stroke_specs))
+        self._settle = self.get_parameter('settle_time').value
+        self._lockstep = self.get_parameter('lockstep').value
+        self._knots = self.get_parameter('knots_per_stroke').value
+        self._lead = 0.0 if self._lockstep else self.get_parameter('command_lead').value
+        self.planner = FeedPlanner(self.goal, travelling_wave=len(self.stroke.phases) > 1)
+
+        self._pub_trajectory = self.create_publisher(JointTrajectory, 'actuator/trajectory',
+                                                     topic_qos('actuator/trajectory'))
+        self._pub_status = self.create_publisher(String, 'feed_controller/status', STATUS_QOS)
+        self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', topic_qos('/diagnostics'))
+        self.create_subscription(PoseStamped, 'particle/pose', self._on_pose, topic_qos('particle/pose'))
+        self.create_subscription(TwistStamped, 'particle/twist', self._on_twist, topic_qos('particle/twist'))
+        self._step_client = self.create_client(Trigger, 'simulator/step') if self._lockstep else None
+        self.create_timer(1.0, self._publish_diagnostics)
+
+        self._poses: dict[int, PoseStamped] = {}
+        self._twists: dict[int, TwistStamped] = {}
+        self._burst: Burst | None = None
+        self._burst_from_x = 0.0
+        self._quiet_after = 0.0          # sim time (s) before which the part is not judged at rest
+        self.start_time: float | None = None
+        self.finish_time: float | None = None
+        self.last_x = float('nan')
+        self.last_t = 0.0
+        self.commands_sent = 0
+
+    # -- state in ------------------------------------------------------------------------------------
+
+    def _on_pose(self, msg: PoseStamped) -> None:
+        self._poses[self._key(msg.header.stamp)] = msg
+        self._try_decide(self._key(msg.header.stamp))
+
+    def _on_twist(self, msg: TwistStamped) -> None:
+        self._twists[self._key(msg.header.stamp)] = msg
+        self._try_decide(self._key(msg.header.stamp))
+
+    @staticmethod
+    def _key(stamp: Time) -> int:
+        return stamp.sec * 1_000_000_000 + stamp.nanosec
+
+    def _try_decide(self, key: int) -> None:
+        """Decide once the pose and twist of one sim time are both in (older unmatched ones are dropped)."""
+        if key not in self._poses or key not in self._twists:
+            return
+        pose, twist = self._poses.pop(key), self._twists.pop(key)
+        for old in [k for k in self._poses if k < key]:
+            del self._poses[old]
+        for old in [k for k in self._twists if k < key]:
+            del self._twists[old]
+        self._decide(stamp_s(pose.header.stamp), pose.pose.position.x, twist)
+
+    # -- control -------------------------------------------------------------------------------------
+
+    @property
+    def done(self) -> bool:
+        return self.planner.status != 'running'
+
+    def _decide(self, t: float, x: float, twist: TwistStamped) -> None:
+        self.last_t, self.last_x = t, x
+        if self.done:
+            return
+        if self.start_time is None:
+            self.start_time = t
+        at_rest = twist.twist.linear.x == 0.0 and twist.twist.linear.z == 0.0 and t >= self._quiet_after
+        if not at_rest:
+            self._grant_step()
+            return
+        if self._burst is not None:
+            self.planner.observe(self._burst, self._burst_from_x, x)
+            self._burst = None
+        burst = self.planner.next_burst(x)
+        if burst is None:
+            self._finish(t, x)
+            return
+        self._fire(burst, t, x)
+
+    def _fire(self, burst: Burst, t: float, x: float) -> None:
+        """Send ``burst`` stamped to start at t + ``command_lead`` (sim time; in lockstep at t, where the
+        simulator waits) and judge the part again ``settle_time`` after the burst's end."""
+        phases = tuple(reversed(self.stroke.phases)) if burst.reversed_wave else self.stroke.phases
+        stroke = dataclasses.replace(self.stroke, amplitude=burst.amplitude_m, count=burst.count, delay=0.0,
+                                     pause=self.goal.stroke_pause, phases=phases)
+        n = len(stroke.phases)
+        start = t + self._lead
+        msg = messages.trajectory(joint_names(n), *sample_waveform(stroke, n, self._knots),
+                                  messages.to_time(start))
+        self._burst, self._burst_from_x = burst, x
+        self._quiet_after = start + stroke.burst_end_s() + self._settle
+        self.send(msg)
+
+    def send(self, msg: JointTrajectory) -> None:
+        """Publish a command (in lockstep it also grants the simulator its next step)."""
+        self._pub_trajectory.publish(msg)
+        self.commands_sent += 1
+
+    def _grant_step(self) -> None:
+        if self._step_client is not None:
+            self._step_client.call_async(Trigger.Request())
+
+    def _finish(self, t: float, x: float) -> None:
+        self.finish_time = t
+        self._pub_status.publish(String(data=self.status_text()))
+        self.get_logger().info(self.status_text())
+        self._publish_diagnostics()
+
+    # -- reporting -----------------------------------------------------------------------------------
+
+    def result(self) -> dict[str, Any]:
+        """The run's outcome: ``reached``, ``time_to_target_s`` (sim), ``strokes``, ``final_error_m``."""
+        elapsed = None
+        if self.finish_time is not None and self.start_time is not None and self.planner.status == 'reached':
+            elapsed = self.finish_time - self.start_time
+        return {'reached': self.planner.status == 'reached', 'status': self.planner.status,
+                'reason': self.planner.reason, 'time_to_target_s': elapsed, 'strokes': self.planner.strokes,
+                'bursts': self.planner.bursts, 'final_x_m': self.last_x,
+                'final_error_m': self.goal.target_x - self.last_x}
+
+    def status_text(self) -> str:
+        r = self.result()
+        if r['reached']:
+            return (f"reached: x = {r['final_x_m'] * 1e3:.6f} mm, error {r['final_error_m'] * 1e6:+.3f} um, "
+                    f"{r['strokes']} strokes in {r['bursts']} bursts, {r['time_to_target_s']:.6f} s sim time")
+        if self.planner.status == 'unreachable':
+            return f"unreachable: {r['reason']} (x = {r['final_x_m'] * 1e3:.6f} mm after {r['strokes']} strokes)"
+        return f"running: x = {r['final_x_m'] * 1e3:.6f} mm, {r['strokes']} strokes so far"
+
+    def _publish_diagnostics(self) -> None:
+        level = {'reached': DiagnosticStatus.OK, 'running': DiagnosticStatus.OK}.get(self.planner.status,
+                                                                                    DiagnosticStatus.ERROR)
+        status = DiagnosticStatus(name=f'{self.get_name()}: feed', hardware_id='micro_feeder', level=level,
+                                  message=self.status_text(),
+                                  values=[KeyValue(key=k, value=str(v)) for k, v in self.result().items()])
+        self._pub_diag.publish(DiagnosticArray(header=Header(stamp=messages.to_time(self.last_t)),
+                                               status=[status]))
+
+
+def main(args: list[str] | None = None) -> int:
+    """Console script ``feed_controller``: ``feed_controller --ros-args -p feed.target_x:=0.45e-3``."""
+    return spin_node('feed_controller', FeedController, args)
