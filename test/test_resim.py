@@ -31,6 +31,7 @@ from micro_feeder.physics.waveforms import StrokeParams
 
 STEP = 1e-4     # s: not a power of two, so sim times are sums that only the simulator's own additions reproduce
 TIMEOUT = 10.0  # s, any single wait
+STEPS = 260     # simulator/step calls in the recorded run
 
 
 def _burst(stamp_s: float) -> object:
@@ -74,6 +75,7 @@ def _record_stepped_run(context: Context, path: Path) -> dict[str, int]:
              and sim.count_subscribers('simulator/command_receipts') == 2
              and recorder.received['/simulator/parameters'] == 1, 'recorder and probe matched')
         send('actuator/trajectory', _burst(0.0))                     # stamp 0 at t = 0: on receipt
+        at_start = recorder.received['/particle/pose']  # 1 when the recorder matched before the pose at t = 0
         probe.step(executor, 60)
         send('actuator/trajectory', _hold(0.0093, 30e-6))            # a future stamp: at t = 9.3 ms
         probe.step(executor, 60)
@@ -85,7 +87,7 @@ def _record_stepped_run(context: Context, path: Path) -> dict[str, int]:
         send('actuator/trajectory', _hold(0.001, 5e-6))              # a stamp in the past: starts now
         probe.step(executor, 40)
         assert sim.rejected == 1
-        wait(lambda: recorder.received['/particle/pose'] >= 260, 'every pose recorded')
+        wait(lambda: recorder.received['/particle/pose'] == at_start + STEPS, 'every pose recorded')
         received = {topic: n for topic, n in recorder.received.items()}
     finally:
         executor.shutdown()
@@ -113,7 +115,8 @@ def test_stepped_log_resimulates_bit_for_bit(stepped_log: Path) -> None:
     xs = {m.message.pose.position.x for m in log.messages(['particle/pose'])}
     assert len(xs) > 10, 'the part must move, or a zero difference proves nothing'
     report = resimulate(log)
-    assert report.poses == log.topics['/particle/pose'].count in (260, 261)  # 261: the pose at t = 0 too
+    assert report.poses == log.topics['/particle/pose'].count in (STEPS, STEPS + 1)  # + the pose at t = 0
+    assert round(report.sim_time * 1e9) == round(STEPS * STEP * 1e9)
     assert report.commands_applied == 5 and report.commands_rejected == 1
     assert report.exact_stop_times and report.receipts == 'recorded' and report.mode == 'stepped'
     assert report.max_error == 0.0 and report.identical, report.verdict()
@@ -122,7 +125,7 @@ def test_stepped_log_resimulates_bit_for_bit(stepped_log: Path) -> None:
 
 def test_a_changed_parameter_shows_as_a_difference(stepped_log: Path) -> None:
     report = resimulate(LogReader(stepped_log), {'particle.mass': 2.2e-9})
-    assert report.poses >= 260
+    assert report.poses >= STEPS
     assert report.max_error > 1e-9 and not report.identical
 
 
@@ -132,7 +135,7 @@ def test_cli_verdict_json_and_tolerance(stepped_log: Path, capsys: pytest.Captur
     assert out.startswith('resim: IDENTICAL: re-simulated bit for bit (26') and len(out.splitlines()) == 1
     assert cli_main(['resim', str(stepped_log), '--json']) == 0
     report = json.loads(capsys.readouterr().out)
-    assert report['identical'] and report['max_error'] == 0.0 and report['poses'] >= 260
+    assert report['identical'] and report['max_error'] == 0.0 and report['poses'] >= STEPS
     assert cli_main(['resim', str(stepped_log), '--set', 'gravity=5.0', '--tolerance', '1e-12']) == 1
     assert capsys.readouterr().out.startswith('resim: DIFFERENT: largest difference')
 
@@ -163,4 +166,4 @@ def test_info_says_how_the_simulator_ran(stepped_log: Path) -> None:
     assert rows['/actuator/trajectory'].rate is None and rows['/particle/pose'].rate > 0
     text = format_summary(summary)
     assert f'stepped through simulator/step, {STEP:g} s per step; 6 commands received' in text
-    assert '– 0.025900 s (particle/pose stamps)' in text
+    assert '– 0.026000 s (particle/pose stamps)' in text
