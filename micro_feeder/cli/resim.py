@@ -17,7 +17,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                     'parameters the simulator recorded, each at the sim time the simulator received it, and '
                     'report the largest difference between the recorded and the re-simulated part position '
                     '(x, z) over every recorded particle/pose. A stepped-mode recording re-simulates bit for '
-                    'bit (difference 0); a real-time one differs slightly, and the output says why. '
+                    'bit (difference 0); a real-time one may differ very slightly, and the output says why. '
                     '--params/--set change model parameters on top of the recorded ones (what-if runs).')
     parser.add_argument('log', metavar='LOG', help='log directory or .mcap file')
     add_model_options(parser)
