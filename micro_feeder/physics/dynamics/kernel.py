@@ -51,9 +51,13 @@ FS_T, FS_T_ENTRY, FS_MAX_SPEED, FS_H = range(4)
 N_FS = 4
 N_SCRATCH = 11
 
-# Dormand-Prince 5(4): nodes, 5th-order weights, error weights (b - b*); the stage coefficients are
-# written out in dopri5_step.
+# Dormand-Prince 5(4): nodes, stage coefficients, 5th-order weights, error weights (b - b*).
 DP_C = (0.0, 1 / 5, 3 / 10, 4 / 5, 8 / 9, 1.0)
+DP_A = ((1 / 5, 0.0, 0.0, 0.0, 0.0),
+        (3 / 40, 9 / 40, 0.0, 0.0, 0.0),
+        (44 / 45, -56 / 15, 32 / 9, 0.0, 0.0),
+        (19372 / 6561, -25360 / 2187, 64448 / 6561, -212 / 729, 0.0),
+        (9017 / 3168, -355 / 33, 46732 / 5247, 49 / 176, -5103 / 18656))
 DP_B = (35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84)
 DP_E = (71 / 57600, 0.0, -71 / 16695, 71 / 1920, -17253 / 339200, 22 / 525, -1 / 40)
 # Dense output (Hairer & Wanner's DOPRI5 continuous extension, 4th order): weights of k1, k3..k7.
@@ -233,18 +237,16 @@ def locate_all(src: tuple, t: float, cur: np.ndarray) -> float:
 def rk4_step(mode: int, direction: int, t: float, y: np.ndarray, f0: np.ndarray, h: float, model: tuple,
              src: tuple, cur: np.ndarray, st: np.ndarray, aux: np.ndarray, work: np.ndarray,
              out: np.ndarray) -> None:
-    """One classical RK4 step of size ``h`` from (t, y) with slope ``f0`` at its start, into ``out``."""
+    """One classical RK4 step of size ``h`` from (t, y) with slope ``f0`` at its start, into ``out``
+    (stages k2..k4 in ``work[0:3]``; one evaluation site in a loop, compiled once)."""
     k2, k3, k4, ytmp = work[0], work[1], work[2], work[3]
     n = y.size
-    for i in range(n):
-        ytmp[i] = y[i] + 0.5 * h * f0[i]
-    evaluate(mode, direction, t + 0.5 * h, ytmp, model, src, cur, st, aux, k2)
-    for i in range(n):
-        ytmp[i] = y[i] + 0.5 * h * k2[i]
-    evaluate(mode, direction, t + 0.5 * h, ytmp, model, src, cur, st, aux, k3)
-    for i in range(n):
-        ytmp[i] = y[i] + h * k3[i]
-    evaluate(mode, direction, t + h, ytmp, model, src, cur, st, aux, k4)
+    for stage in range(3):
+        previous = f0 if stage == 0 else work[stage - 1]
+        weight = 1.0 if stage == 2 else 0.5
+        for i in range(n):
+            ytmp[i] = y[i] + weight * h * previous[i]
+        evaluate(mode, direction, t + weight * h, ytmp, model, src, cur, st, aux, work[stage])
     for i in range(n):
         out[i] = y[i] + (h / 6.0) * (f0[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
 
@@ -254,30 +256,21 @@ def dopri5_step(mode: int, direction: int, t: float, y: np.ndarray, f0: np.ndarr
                 model: tuple, src: tuple, cur: np.ndarray, st: np.ndarray, aux: np.ndarray,
                 work: np.ndarray, out: np.ndarray) -> None:
     """The 5th-order Dormand-Prince solution of a step of size ``h`` from (t, y), slope ``f0``, into
-    ``out``; stages k2..k6 are left in ``work[0:5]`` for :func:`dopri5_error`. (Stages written out:
-    looping over the coefficient tuples costs a third of the step.)"""
-    k2, k3, k4, k5, k6, ytmp = work[0], work[1], work[2], work[3], work[4], work[5]
+    ``out``; stages k2..k6 are left in ``work[0:5]`` for :func:`dopri5_error` and :func:`dopri5_dense`.
+    (One evaluation site in a loop: the inlined right-hand side is compiled once, not five times.)"""
+    ytmp = work[5]
     n = y.size
+    for stage in range(5):
+        a = DP_A[stage]
+        for i in range(n):
+            acc = a[0] * f0[i]
+            for j in range(stage):
+                acc += a[j + 1] * work[j, i]
+            ytmp[i] = y[i] + h * acc
+        evaluate(mode, direction, t + DP_C[stage + 1] * h, ytmp, model, src, cur, st, aux, work[stage])
     for i in range(n):
-        ytmp[i] = y[i] + h * (1 / 5) * f0[i]
-    evaluate(mode, direction, t + DP_C[1] * h, ytmp, model, src, cur, st, aux, k2)
-    for i in range(n):
-        ytmp[i] = y[i] + h * (3 / 40 * f0[i] + 9 / 40 * k2[i])
-    evaluate(mode, direction, t + DP_C[2] * h, ytmp, model, src, cur, st, aux, k3)
-    for i in range(n):
-        ytmp[i] = y[i] + h * (44 / 45 * f0[i] - 56 / 15 * k2[i] + 32 / 9 * k3[i])
-    evaluate(mode, direction, t + DP_C[3] * h, ytmp, model, src, cur, st, aux, k4)
-    for i in range(n):
-        ytmp[i] = y[i] + h * (19372 / 6561 * f0[i] - 25360 / 2187 * k2[i] + 64448 / 6561 * k3[i]
-                              - 212 / 729 * k4[i])
-    evaluate(mode, direction, t + DP_C[4] * h, ytmp, model, src, cur, st, aux, k5)
-    for i in range(n):
-        ytmp[i] = y[i] + h * (9017 / 3168 * f0[i] - 355 / 33 * k2[i] + 46732 / 5247 * k3[i]
-                              + 49 / 176 * k4[i] - 5103 / 18656 * k5[i])
-    evaluate(mode, direction, t + h, ytmp, model, src, cur, st, aux, k6)
-    for i in range(n):
-        out[i] = y[i] + h * (DP_B[0] * f0[i] + DP_B[2] * k3[i] + DP_B[3] * k4[i] + DP_B[4] * k5[i]
-                             + DP_B[5] * k6[i])
+        out[i] = y[i] + h * (DP_B[0] * f0[i] + DP_B[2] * work[1, i] + DP_B[3] * work[2, i]
+                             + DP_B[4] * work[3, i] + DP_B[5] * work[4, i])
 
 
 @jit_inline
@@ -581,23 +574,26 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
         if which < 0:
             direction = iv[IV_DIR]
             moving = mode != STUCK or prm[P_PIEZO] != 0.0
-            if adaptive and moving:             # Dormand-Prince with error control
+            error_control = adaptive and moving     # Dormand-Prince; else RK4, or stuck checks
+            if error_control:
                 h = min(fs[FS_H], dt, t_next - t, t_target - t)
-                while True:
-                    dopri5_step(mode, direction, t, y, f0, h, model, src, cur, st, aux, work, y1)
-                    e0, e1 = evaluate(mode, direction, t + h, y1, model, src, cur, st, aux, f1)
-                    err = dopri5_error(h, f0, work, f1, prm[P_TOLERANCE], dt)
-                    if err <= 1.0 or not math.isfinite(err) or h < 1e-14:
-                        break
-                    h *= max(0.2, 0.9 * err ** -0.2)
-                fs[FS_H] = h * min(5.0, max(0.2, 0.9 * max(err, 1e-10) ** -0.2))
             else:
                 h = min(dt if moving or threshold else prm[P_CHECK_STEP], t_next - t, t_target - t)
-                if moving:
+            while True:
+                if error_control:
+                    dopri5_step(mode, direction, t, y, f0, h, model, src, cur, st, aux, work, y1)
+                elif moving:
                     rk4_step(mode, direction, t, y, f0, h, model, src, cur, st, aux, work, y1)
                 else:                           # stuck: nothing to integrate, only the checks
                     copy_into(y1, y)
                 e0, e1 = evaluate(mode, direction, t + h, y1, model, src, cur, st, aux, f1)
+                if not error_control:
+                    break
+                err = dopri5_error(h, f0, work, f1, prm[P_TOLERANCE], dt)
+                if err <= 1.0 or not math.isfinite(err) or h < 1e-14:
+                    fs[FS_H] = h * min(5.0, max(0.2, 0.9 * max(err, 1e-10) ** -0.2))
+                    break
+                h *= max(0.2, 0.9 * err ** -0.2)
             if not finite(y1) or math.isnan(e0) or math.isnan(e1):
                 status = NON_FINITE
                 break
