@@ -1,9 +1,11 @@
 """Benchmark of the simulator node at 1 kHz publishing, as a separate process seen by an outside client.
 
 Measures: achieved real-time factor (target: holds 1.0), CPU share of the simulator process (target
-<= 25 % of one core), tick period p50/p99 (target p99 <= 1.5 ms; from the node's /diagnostics), and the
-latency from a trajectory command to the first pose that reflects it (p50/p99; the pose's tilt changes
-as soon as the stroke does, since the part sits on the bump's flank).
+<= 25 % of one core) and its split between the loop thread, the main (executor) thread and the rest
+(Fast DDS), tick period p50/p99 (target p99 <= 1.5 ms; from the node's /diagnostics), and the latency from
+a trajectory command to the first pose that reflects it (p50/p99; the pose's tilt changes as soon as the
+stroke does, since the part sits on the bump's flank). Prints the load average before and after: the
+figures are only comparable at a similar load (2 cores).
 
     .venv/bin/python bench/bench_nodes.py [--seconds 10] [--commands 60]
 """
@@ -37,8 +39,33 @@ CLK_TCK = os.sysconf('SC_CLK_TCK')
 
 
 def cpu_seconds(pid: int) -> float:
-    fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+    return _stat_cpu(Path(f'/proc/{pid}/stat'))
+
+
+def _stat_cpu(stat: Path) -> float:
+    """utime + stime (s) from a /proc stat file."""
+    fields = stat.read_text().rsplit(')', 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / CLK_TCK
+
+
+def thread_cpu(pid: int) -> dict[int, float]:
+    """CPU seconds per thread id of process ``pid``."""
+    out = {}
+    for task in Path(f'/proc/{pid}/task').iterdir():
+        try:
+            out[int(task.name)] = _stat_cpu(task / 'stat')
+        except OSError:
+            continue
+    return out
+
+
+def thread_split(pid: int, before: dict[int, float], after: dict[int, float], wall: float) -> str:
+    """'loop 15.1 %, main 0.8 %, other 2.0 %': the busiest thread other than the main one is the loop
+    thread (the node's only busy Python thread); 'other' is Fast DDS's threads."""
+    used = {tid: (cpu - before.get(tid, 0.0)) / wall * 100 for tid, cpu in after.items()}
+    main = used.pop(pid, 0.0)
+    loop = max(used.values(), default=0.0)
+    return f'loop {loop:.1f} %, main {main:.1f} %, other {sum(used.values()) - loop:.1f} %'
 
 
 def spin_until(executor: SingleThreadedExecutor, predicate, timeout: float) -> bool:
@@ -76,9 +103,13 @@ def main() -> int:
             print('simulator did not start', file=sys.stderr)
             return 1
         # steady state: real-time factor, CPU, tick timing
+        load0 = os.getloadavg()[0]
         wall0, cpu0, n0, d0 = time.perf_counter(), cpu_seconds(proc.pid), len(poses), len(diags)
+        threads0 = thread_cpu(proc.pid)
         spin_until(executor, lambda: False, args.seconds)
         wall1, cpu1 = time.perf_counter(), cpu_seconds(proc.pid)
+        split = thread_split(proc.pid, threads0, thread_cpu(proc.pid), wall1 - wall0)
+        load1 = os.getloadavg()[0]
         window = poses[n0:]
         rtf = (window[-1][1] - window[0][1]) / (window[-1][0] - window[0][0])
         cpu = (cpu1 - cpu0) / (wall1 - wall0)
@@ -109,10 +140,11 @@ def main() -> int:
         executor.shutdown()
         node.destroy_node()
         rclpy.shutdown()
-    print(f'simulator process at publish_rate 1000 Hz, {args.seconds:g} s steady state ({os.cpu_count()} cores)')
+    print(f'simulator process at publish_rate 1000 Hz, {args.seconds:g} s steady state ({os.cpu_count()} cores, '
+          f'load average {load0:.2f} -> {load1:.2f})')
     print(f'  poses received          {rate:8.1f} /s')
     print(f'  real-time factor        {rtf:8.4f}    target: holds 1.0')
-    print(f'  CPU share               {cpu * 100:7.1f} %    target: <= 25 % of one core')
+    print(f'  CPU share               {cpu * 100:7.1f} %    target: <= 25 % of one core ({split})')
     print(f'  tick period p50         {p50:8.3f} ms')
     print(f'  tick period p99         {np.median(p99):8.3f} ms (median of 1 s windows; worst {max(p99):.3f} ms)'
           f'    target: <= 1.5 ms')

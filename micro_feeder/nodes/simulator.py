@@ -1,12 +1,23 @@
 """The ``simulator`` node: the real-time loop of DESIGN.md §4 around the physics stepper.
 
-A wall-clock timer at ``publish_rate`` advances sim time by elapsed wall time × ``real_time_factor``
-(0: as fast as possible, ``step_period`` per step), never more than two timer periods' worth per tick
-(a late tick slows sim time instead of building up a debt), then publishes the state on the topics of
-docs/interface.md. Commands on ``actuator/trajectory`` / ``actuator/command`` are checked
-(:mod:`.commands`) and applied by their stamps in sim time, so a paused run advanced with
-``simulator/step`` is repeatable bit for bit. Model parameters can be set at any time and are applied
-on ``simulator/reset``; ``real_time_factor`` and ``step_period`` apply at once.
+A loop thread owned by the node ticks at ``publish_rate`` on the wall clock and advances sim time by
+elapsed wall time × ``real_time_factor`` (0: as fast as possible, ``step_period`` per step), never more
+than two periods' worth per tick (a late tick slows sim time instead of building up a debt), then
+publishes the state on the topics of docs/interface.md. Why a thread and not an rclpy timer: rclpy's
+timer dispatch alone costs 12-15 % of a core at 1 kHz and adds jitter (bench/bench_nodes.py); a thread
+sleeping to its next deadline costs a fraction of that. The executor (on whatever thread spins the node)
+still runs the subscriptions, services, parameter callbacks and the 1 Hz diagnostics; one lock
+serialises everything that touches the stepper or publishes state, so a command or a service call
+happens between two ticks, never inside one. The thread sleeps while paused and is stopped and joined
+by :meth:`Simulator.destroy_node` (which ``rclpy.shutdown`` also calls for a node left alive).
+
+Commands on ``actuator/trajectory`` / ``actuator/command`` are checked (:mod:`.commands`) and applied
+by their stamps in sim time, so a paused run advanced with ``simulator/step`` is repeatable bit for bit.
+With ``lockstep`` the wall clock never advances sim time (there is no loop thread): each
+``simulator/step`` call and each command message received grants one ``step_period`` (the command is
+applied first), so a controller under test sees the same physics however slow it is. Model parameters
+can be set at any time and are applied on ``simulator/reset``; ``real_time_factor`` and ``step_period``
+apply at once.
 
 For ``resim`` (:mod:`.resim`) a log must say what the simulator did with each command: the parameters in
 force go out on the latched ``simulator/parameters`` (at start, on reset, on a change that applies at
@@ -17,9 +28,12 @@ with the sim time it was received at.
 from __future__ import annotations
 
 import collections
+import functools
+import math
+import threading
 import time
-from collections.abc import Iterable, Mapping
-from typing import Any
+from collections.abc import Callable, Iterable, Mapping
+from typing import Any, TypeVar
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -58,8 +72,20 @@ NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
                               'real_time_factor is 0', 's', gt=0, le=1.0), 1e-3),
     'markers_rate': (ParamSpec('rate of surface/markers (wall clock)', 'Hz', gt=0, le=1000, read_only=True),
                      30.0),
+    'lockstep': (ParamSpec('sim time never advances on the wall clock: one step_period per simulator/step '
+                           'call and per command message received', kind='bool', read_only=True), False),
 }
 
+F = TypeVar('F', bound=Callable[..., Any])
+
+
+def locked(method: F) -> F:
+    """Run a :class:`Simulator` method holding the node's lock (an entry point from another thread)."""
+    @functools.wraps(method)
+    def wrapper(self: Simulator, *args: Any, **kwargs: Any) -> Any:
+        with self._lock:
+            return method(self, *args, **kwargs)
+    return wrapper  # type: ignore[return-value]
 
 
 def topic_qos(name: str) -> QoSProfile:
@@ -83,6 +109,7 @@ class Simulator(Node):
 
     def __init__(self, overrides: Mapping[str, Any] | None = None, **kwargs: Any):
         super().__init__('simulator', **kwargs)
+        self._lock = threading.RLock()      # the stepper and the state publishers: tick thread vs executor
         self._model_specs = model_specs()
         self._specs = {**self._model_specs, **NODE_SPECS}
         declare(self, self._specs, overrides)
@@ -94,7 +121,10 @@ class Simulator(Node):
         self._step_period: float = p['step_period']
         self._period = 1.0 / p['publish_rate']
         self._publish_clock: bool = p['publish_clock']
-        self._paused: bool = p['start_paused']
+        self._lockstep: bool = p['lockstep']
+        self._paused: bool = p['start_paused'] or self._lockstep
+        self._running = threading.Event()   # set while the loop thread may tick (not paused, not stopping)
+        self._stopping = False
         self._markers_period = 1.0 / p['markers_rate']
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.add_post_set_parameters_callback(self._after_set_parameters)
@@ -119,12 +149,12 @@ class Simulator(Node):
 
         self.rejected = 0
         self.last_rejection = ''
+        self.steps_granted = 0
         self.overruns = 0
         self.error = ''
         self._mode = ''
         self._tick_periods: collections.deque[float] = collections.deque(maxlen=4000)
         self._tick_busy: collections.deque[float] = collections.deque(maxlen=4000)
-        steady = Clock(clock_type=ClockType.STEADY_TIME)
         self._last_tick = time.perf_counter()
         self._last_markers = -float('inf')
         self._window = (time.perf_counter(), self._stepper.t)
@@ -132,8 +162,12 @@ class Simulator(Node):
         self._configure_outputs()
         self._publish_parameters()
         self._publish_state([])
-        self.create_timer(self._period, self._tick, clock=steady)
-        self.create_timer(1.0, self._publish_diagnostics, clock=steady)
+        self.create_timer(1.0, self._publish_diagnostics, clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self._loop_thread: threading.Thread | None = None
+        if not self._lockstep:
+            self._set_paused(self._paused)
+            self._loop_thread = threading.Thread(target=self._loop, name='simulator-loop', daemon=True)
+            self._loop_thread.start()
 
     def _publisher(self, msg_type: type, topic: str) -> Any:
         return self.create_publisher(msg_type, topic, topic_qos(topic))
@@ -146,20 +180,78 @@ class Simulator(Node):
 
     @property
     def paused(self) -> bool:
+        """True when the wall clock does not advance sim time (paused, failed, or lockstep)."""
         return self._paused
+
+    @property
+    def lockstep(self) -> bool:
+        return self._lockstep
 
     @property
     def joints(self) -> list[str]:
         return joint_names(self._stepper.model.n_actuators)
 
+    @locked
+    def grant_step(self) -> tuple[bool, str]:
+        """Advance one ``step_period`` and publish: what ``simulator/step`` does. Only while paused (always,
+        in lockstep) and not after a simulation failure. Returns (success, message)."""
+        if not self._paused or self.error:
+            return False, self.error or 'step needs the simulation paused (call simulator/pause true)'
+        self.steps_granted += 1
+        self._step(self._stepper.t + self._step_period)
+        return not self.error, self.error or f't = {self._stepper.t:.9f} s'
+
+    def destroy_node(self) -> None:
+        """Stop and join the loop thread, then destroy the node (publishers last)."""
+        self._stopping = True
+        self._running.set()
+        if self._loop_thread is not None:
+            self._loop_thread.join()
+            self._loop_thread = None
+        super().destroy_node()
+
     # -- loop ---------------------------------------------------------------------------------------
 
+    def _set_paused(self, paused: bool) -> None:
+        """Pause or run the wall-clock loop (the thread sleeps on ``_running`` while paused)."""
+        self._paused = paused
+        if paused:
+            self._running.clear()
+        else:
+            self._last_tick = time.perf_counter()
+            self._running.set()
+
+    def _loop(self) -> None:
+        """The loop thread: tick every ``_period`` s of wall time on a fixed grid (a late tick skips the
+        grid points it missed rather than catching up), sleeping while paused, until :meth:`destroy_node`."""
+        next_tick = time.perf_counter() + self._period
+        while not self._stopping:
+            if not self._running.is_set():
+                self._running.wait()
+                next_tick = time.perf_counter() + self._period
+                continue
+            delay = next_tick - time.perf_counter()
+            if delay > 0.0:
+                time.sleep(delay)
+            if self._stopping:
+                return
+            try:
+                self._tick()
+            except Exception as err:  # a loop that dies silently would look like a frozen simulation
+                self._fail(f'loop thread stopped: {type(err).__name__}: {err}')
+                raise
+            now = time.perf_counter()
+            next_tick += self._period
+            if next_tick <= now:
+                next_tick += math.ceil((now - next_tick) / self._period) * self._period
+
+    @locked
     def _tick(self) -> None:
         start = time.perf_counter()
-        self._tick_periods.append(start - self._last_tick)
-        elapsed, self._last_tick = start - self._last_tick, start
         if self._paused:
             return
+        self._tick_periods.append(start - self._last_tick)
+        elapsed, self._last_tick = start - self._last_tick, start
         if self._rtf > 0.0:
             self._step(self._stepper.t + min(elapsed, 2.0 * self._period) * self._rtf)
         else:
@@ -176,12 +268,17 @@ class Simulator(Node):
         try:
             events = self._stepper.advance(t_target)
         except SimulationError as err:
-            self.error = str(err)
-            self._paused = True
-            self.get_logger().error(f'simulation stopped (paused; call simulator/reset): {err}')
-            self._publish_diagnostics()
+            self._fail(str(err))
             return
         self._publish_state(events)
+
+    @locked
+    def _fail(self, error: str) -> None:
+        """Stop on an error: pause, log it, report it on /diagnostics (cleared by simulator/reset)."""
+        self.error = error
+        self._set_paused(True)
+        self.get_logger().error(f'simulation stopped (paused; call simulator/reset): {error}')
+        self._publish_diagnostics()
 
     def _publish_state(self, events: list[Event]) -> None:
         obs = self._stepper.observe()
@@ -222,6 +319,7 @@ class Simulator(Node):
         """``simulator/command_receipts``: a command arrived on ``topic`` at the current sim time."""
         self._pub_receipts.publish(Header(stamp=messages.to_time(self._stepper.t), frame_id=topic))
 
+    @locked
     def _on_trajectory(self, msg: JointTrajectory) -> None:
         self._acknowledge('actuator/trajectory')
         try:
@@ -229,7 +327,9 @@ class Simulator(Node):
             self._stepper.command_trajectory(cmd)
         except (CommandRejected, ValueError) as err:
             self._reject(str(err))
+        self._lockstep_grant()
 
+    @locked
     def _on_command(self, msg: Float64MultiArray) -> None:
         self._acknowledge('actuator/command')
         try:
@@ -237,6 +337,12 @@ class Simulator(Node):
                                                             self._stepper.limits))
         except CommandRejected as err:
             self._reject(str(err))
+        self._lockstep_grant()
+
+    def _lockstep_grant(self) -> None:
+        """In lockstep a command message, applied or refused, grants the step its sender waits for."""
+        if self._lockstep:
+            self.grant_step()
 
     def _reject(self, reason: str) -> None:
         self.rejected += 1
@@ -245,6 +351,7 @@ class Simulator(Node):
 
     # -- services -----------------------------------------------------------------------------------
 
+    @locked
     def _on_reset(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         try:
             model = build_model(values(self, self._model_specs))
@@ -263,28 +370,29 @@ class Simulator(Node):
         response.success, response.message = True, 't = 0, model parameters applied'
         return response
 
+    @locked
     def _on_pause(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
         if not request.data and self.error:
             response.success, response.message = False, f'cannot resume after a failure: {self.error}'
             return response
-        self._paused = request.data
-        self._last_tick = time.perf_counter()
+        if not request.data and self._lockstep:
+            response.success = False
+            response.message = ('lockstep: sim time advances only per simulator/step call or command message, '
+                                'never on the wall clock')
+            return response
+        if not self._lockstep:
+            self._set_paused(request.data)
         response.success = True
         response.message = f'{"paused" if self._paused else "running"} at t = {self._stepper.t:.9f} s'
         return response
 
     def _on_step(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        if not self._paused or self.error:
-            response.success = False
-            response.message = self.error or 'step needs the simulation paused (call simulator/pause true)'
-            return response
-        self._step(self._stepper.t + self._step_period)
-        response.success = not self.error
-        response.message = self.error or f't = {self._stepper.t:.9f} s'
+        response.success, response.message = self.grant_step()
         return response
 
     # -- parameters and diagnostics -----------------------------------------------------------------
 
+    @locked
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
         reason = check_changes(self._specs, values(self, self._model_specs), params)
         if reason is not None:
@@ -300,6 +408,7 @@ class Simulator(Node):
             self.get_logger().info('model parameters changed: applied on simulator/reset')
         return SetParametersResult(successful=True)
 
+    @locked
     def _after_set_parameters(self, params: list[Parameter]) -> None:
         if any(p.name in NODE_SPECS for p in params):
             self._publish_parameters()
@@ -314,6 +423,7 @@ class Simulator(Node):
             stamp=messages.to_time(self._stepper.t), node=self.get_fully_qualified_name(),
             new_parameters=self._model_parameters + self._parameter_msgs(NODE_SPECS)))
 
+    @locked
     def diagnostics(self) -> DiagnosticStatus:
         """The simulator's status: achieved real-time factor over the last second, tick timing, counters."""
         now, t = time.perf_counter(), self._stepper.t
@@ -332,12 +442,13 @@ class Simulator(Node):
         lagging = not self._paused and self._rtf > 0 and self.achieved_rtf < 0.95 * self._rtf
         status.level = DiagnosticStatus.ERROR if self.error else (
             DiagnosticStatus.WARN if lagging else DiagnosticStatus.OK)
-        status.message = self.error or ('paused' if self._paused else (
+        status.message = self.error or ('lockstep' if self._lockstep else 'paused' if self._paused else (
             'behind real time: the physics cannot keep up' if lagging else 'running'))
         items = {'sim_time_s': f'{t:.9f}', 'mode': self._stepper.state.mode, 'paused': str(self._paused),
                  'real_time_factor_target': f'{self._rtf:g}', 'real_time_factor_achieved': f'{self.achieved_rtf:.4f}',
                  'tick_period_p50_ms': pct(periods, 50), 'tick_period_p99_ms': pct(periods, 99),
                  'tick_compute_p99_ms': pct(busy, 99), 'overruns': str(self.overruns),
+                 'lockstep': str(self._lockstep), 'steps_granted': str(self.steps_granted),
                  'rejected_commands': str(self.rejected), 'last_rejection': self.last_rejection,
                  'model_parameters_pending_reset': str(self._model_pending)}
         items.update({k: str(v) for k, v in self._stepper.state.transitions.items()})
@@ -347,6 +458,7 @@ class Simulator(Node):
                                       throttle_duration_sec=10.0)
         return status
 
+    @locked
     def _publish_diagnostics(self) -> None:
         self._pub_diag.publish(DiagnosticArray(header=Header(stamp=messages.to_time(self._stepper.t)),
                                                status=[self.diagnostics()]))
