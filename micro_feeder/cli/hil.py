@@ -16,6 +16,9 @@ from . import CommandError
 from ._common import add_model_options, settings_from_args
 from ._session import ros_session
 
+# With --record, the controller starts once the recorder subscribes to these (so the log holds every state).
+RECORDED_BEFORE_START = ('particle/pose', 'particle/twist', 'actuator/trajectory', 'simulator/command_receipts')
+
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
@@ -43,11 +46,11 @@ def run(args: argparse.Namespace) -> int:
 
         sim = session.add(lambda: Simulator(context=session.context,
                                             overrides={**flat, 'lockstep': args.lockstep}))
+        if session.recorder is not None:     # the log starts before the loop does
+            session.spin(lambda: all(sim.count_subscribers(topic) > 0 for topic in RECORDED_BEFORE_START))
         controller = session.add(lambda: FeedController(context=session.context,
                                                         overrides={**flat, 'lockstep': args.lockstep}))
         start = time.perf_counter()
-        if args.lockstep:
-            sim.grant_step()      # the first state; from then on the controller grants every step
         session.spin(lambda: controller.done or bool(sim.error) or sim.stepper.t >= args.timeout)
         wall = time.perf_counter() - start
         result = outcome(sim, controller, wall, session.close_log())

@@ -10,7 +10,9 @@ part rests (ẋ = ż = 0 on a still surface, at least ``settle_time`` after the 
 Decisions use only a pose and a twist with the same stamp, so they depend on the sim state alone and not
 on which topic arrived first. With ``lockstep`` the node is also the simulator's clock master: after
 deciding on the state at t it grants the next ``step_period`` (a trajectory it sends counts as the grant,
-otherwise it calls ``simulator/step``), and never waits for sim time it has not granted.
+otherwise it calls ``simulator/step``), and never waits for sim time it has not granted. It grants the first
+step itself as soon as ``simulator/step`` is available, and ignores the t = 0 state the simulator publishes
+when it starts (that one answers no grant), so every run takes the same steps whatever the start-up timing.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from typing import Any
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, TwistStamped
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -52,6 +55,7 @@ NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
                                'with the simulator in the same process); a late burst starts mid-stroke',
                                's', ge=0, le=1.0, read_only=True), 0.05),
 }
+START_POLL_PERIOD = 0.05   # s (wall clock): how often a lockstep controller looks for the step service
 STATUS_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
@@ -83,7 +87,10 @@ class FeedController(Node):
         self.create_subscription(PoseStamped, 'particle/pose', self._on_pose, topic_qos('particle/pose'))
         self.create_subscription(TwistStamped, 'particle/twist', self._on_twist, topic_qos('particle/twist'))
         self._step_client = self.create_client(Trigger, 'simulator/step') if self._lockstep else None
-        self.create_timer(1.0, self._publish_diagnostics)
+        steady = Clock(clock_type=ClockType.STEADY_TIME)     # sim time does not move until the first grant
+        self._first_grant = (self.create_timer(START_POLL_PERIOD, self._grant_first_step, clock=steady)
+                             if self._lockstep else None)
+        self.create_timer(1.0, self._publish_diagnostics, clock=steady)
 
         self._poses: dict[int, PoseStamped] = {}
         self._twists: dict[int, TwistStamped] = {}
@@ -112,7 +119,7 @@ class FeedController(Node):
 
     def _try_decide(self, key: int) -> None:
         """Decide once the pose and twist of one sim time are both in (older unmatched ones are dropped)."""
-        if key not in self._poses or key not in self._twists:
+        if key not in self._poses or key not in self._twists or (self._lockstep and key == 0):
             return
         pose, twist = self._poses.pop(key), self._twists.pop(key)
         for old in [k for k in self._poses if k < key]:
@@ -168,6 +175,12 @@ class FeedController(Node):
     def _grant_step(self) -> None:
         if self._step_client is not None:
             self._step_client.call_async(Trigger.Request())
+
+    def _grant_first_step(self) -> None:
+        """Lockstep start: one grant as soon as the simulator's step service is there."""
+        if self._step_client.service_is_ready():
+            self.destroy_timer(self._first_grant)
+            self._grant_step()
 
     def _finish(self, t: float, x: float) -> None:
         self.finish_time = t
