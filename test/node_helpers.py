@@ -3,7 +3,12 @@ stepping with bounded waits (on top of ros_helpers: context fixture, wait_until)
 
 from __future__ import annotations
 
+import shutil
+import signal
+import subprocess
+import sys
 from collections import defaultdict
+from pathlib import Path
 from typing import Any
 
 from rclpy.executors import Executor
@@ -70,3 +75,24 @@ def stamp_s(msg: Any) -> float:
     """A header stamp (or a Clock's clock) in seconds."""
     t = msg.clock if hasattr(msg, 'clock') else msg.header.stamp
     return t.sec + t.nanosec * 1e-9
+
+
+def start_process(name: str, *ros_args: str) -> subprocess.Popen:
+    """Start the installed console script ``name`` with ``--ros-args ros_args`` (output captured)."""
+    exe = shutil.which(name, path=str(Path(sys.executable).parent))
+    assert exe, f'console script {name!r} not installed (pip install -e .)'
+    return subprocess.Popen([exe, '--ros-args', *ros_args], stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True)
+
+
+def stop_process(proc: subprocess.Popen) -> tuple[int, str]:
+    """SIGINT and wait (SIGKILL after 20 s): (exit status, -9 when killed; output)."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+    try:
+        out, _ = proc.communicate(timeout=20)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, _ = proc.communicate()
+        return -9, out
+    return proc.returncode, out
