@@ -25,9 +25,18 @@ lint: $(STAMP)
 test: lint
 	$(BIN)/python -m pytest test
 
+# The whole pipeline: contact model, an offline stroke and a frequency sweep, the ROS nodes recording a
+# run, a look at the log, its re-simulation, and the feed controller in the loop.
 demo: $(STAMP)
-	mkdir -p $(OUT)
+	rm -rf $(OUT)/run && mkdir -p $(OUT)
 	$(BIN)/micro-feeder contact --plot $(OUT)/contact.png
+	$(BIN)/micro-feeder simulate --out $(OUT) --plot $(OUT)/simulate.png
+	$(BIN)/micro-feeder sweep --vary stroke.frequency=100:5000:200 --set stroke.count=5 --out $(OUT) --plot $(OUT)/sweep.png
+	$(BIN)/micro-feeder run --duration 3 --set stroke.count=5 --record $(OUT)/run
+	$(BIN)/micro-feeder info $(OUT)/run
+	$(BIN)/micro-feeder plot $(OUT)/run -o $(OUT)/run.png
+	$(BIN)/micro-feeder resim $(OUT)/run
+	$(BIN)/micro-feeder hil --lockstep --params config/travelling_wave.yaml --set feed.target_x=0.8e-3
 
 bench: $(STAMP)
 	for b in bench/bench_*.py; do $(BIN)/python $$b || exit 1; done
