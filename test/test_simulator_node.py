@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Iterator
 
+import numpy as np
 import pytest
 import rclpy
 from builtin_interfaces.msg import Duration
@@ -18,12 +20,14 @@ from ros_helpers import wait_until
 from std_msgs.msg import Float64MultiArray, Header, String
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
+from visualization_msgs.msg import Marker
 
 from micro_feeder.nodes.actuator import sample_waveform
 from micro_feeder.nodes.commands import parse_trajectory
 from micro_feeder.nodes.messages import to_time
 from micro_feeder.nodes.simulator import Simulator, topic_qos
 from micro_feeder.nodes.stepper import Stepper, build_model
+from micro_feeder.physics.surface import surface_profile
 from micro_feeder.physics.waveforms import StrokeParams
 
 STEP = 1e-3
@@ -286,6 +290,68 @@ def test_parameters_refused_with_a_reason_and_applied_on_reset(stepped: Rig) -> 
     stepped.wait(lambda: stepped.probe.msgs['particle/pose'][-1].pose.position.x == 1e-3, 'pose at the new x0')
     (result,) = sim.set_parameters([Parameter('real_time_factor', value=0.0)])     # applies at once
     assert result.successful
+
+
+def _check_markers(rig: Rig, joints: list[str], min_distinct: int) -> None:
+    """Every ``surface/markers`` received so far matches the state published with the same stamp: the
+    LINE_STRIP is the surface profile over the actuators +- 4 widths at the strokes of that stamp's
+    ``actuator/joint_states``, the sphere sits on that stamp's pose; ``min_distinct`` stroke sets seen."""
+    msgs = rig.probe.msgs
+    surface = rig.sim.stepper.model.surface
+    c, w = np.asarray(surface.centers), np.asarray(surface.widths)
+    xs = np.linspace(float(np.min(c - 4 * w)), float(np.max(c + 4 * w)), 200)
+    strokes = {(j.header.stamp.sec, j.header.stamp.nanosec): list(j.position) for j in msgs['actuator/joint_states']}
+    poses = {(p.header.stamp.sec, p.header.stamp.nanosec): p.pose.position for p in msgs['particle/pose']}
+    seen = set()
+    for array in msgs['surface/markers']:
+        line, part = array.markers
+        key = (line.header.stamp.sec, line.header.stamp.nanosec)
+        assert key == (part.header.stamp.sec, part.header.stamp.nanosec) and key in strokes, key
+        assert (line.header.frame_id, part.header.frame_id, line.ns, part.ns) == ('feeder',) * 2 + ('micro_feeder',) * 2
+        assert (line.id, line.type, line.action, part.id, part.type, part.action) == (
+            0, Marker.LINE_STRIP, Marker.ADD, 1, Marker.SPHERE, Marker.ADD)
+        assert [p.x for p in line.points] == xs.tolist() and {p.y for p in line.points} == {0.0}
+        assert [p.z for p in line.points] == surface_profile(xs, np.array(strokes[key]), c, w).tolist(), key
+        assert line.scale.x == 10e-6 and line.pose.orientation.w == 1.0
+        assert (line.color.r, line.color.g, line.color.b, line.color.a) == pytest.approx((0.6, 0.6, 0.7, 1.0))
+        assert (part.pose.position.x, part.pose.position.y, part.pose.position.z) == (
+            poses[key].x, 0.0, poses[key].z + 50e-6)
+        assert (part.scale.x, part.scale.y, part.scale.z, part.pose.orientation.w) == (100e-6, 100e-6, 100e-6, 1.0)
+        assert (part.color.r, part.color.g, part.color.b, part.color.a) == pytest.approx((0.2, 0.7, 0.2, 1.0))
+        assert len(strokes[key]) == len(joints)
+        seen.add(tuple(strokes[key]))
+    assert len(seen) >= min_distinct, seen
+
+
+def test_markers_follow_the_surface_profile_and_the_part(ros_context: Context) -> None:
+    """surface/markers at every step (markers_rate at its maximum, a step at least 1 ms of wall time apart):
+    content against the profile at each stamp's strokes, before and after a reset to two actuators."""
+    rig = Rig(ros_context, start_paused=True, step_period=STEP, markers_rate=1000.0)
+    try:
+        rig.send_trajectory(hold_message(0.0, [0.003], [6e-6]))      # 2, 4, 6 um at 1, 2, 3 ms: part stays stuck
+        for _ in range(3):
+            time.sleep(0.0015)
+            rig.step(1)
+        rig.wait(lambda: len(rig.probe.msgs['surface/markers']) >= 3, 'a marker per step')
+        _check_markers(rig, ['piezo_0'], 3)
+        result = rig.sim.set_parameters_atomically([Parameter('surface.centers', value=[0.0, 2e-3]),
+                                                    Parameter('surface.widths', value=[1e-3, 0.5e-3]),
+                                                    Parameter('stroke.phases', value=[0.0, 0.25])])
+        assert result.successful, result.reason
+        assert rig.probe.call(rig.executor, Trigger, 'simulator/reset').success
+        rig.probe.msgs['surface/markers'].clear()
+        msg = hold_message(0.0, [0.002], [4e-6])
+        msg.joint_names = ['piezo_0', 'piezo_1']
+        msg.points[0].positions = [4e-6, -3e-6]
+        rig.send_trajectory(msg)
+        for _ in range(2):
+            time.sleep(0.0015)
+            rig.step(1)
+        rig.wait(lambda: len(rig.probe.msgs['surface/markers']) >= 2, 'a marker per step after the reset')
+        _check_markers(rig, ['piezo_0', 'piezo_1'], 2)
+        assert rig.sim.rejected == 0
+    finally:
+        rig.close()
 
 
 def _stepped_run(context: Context) -> list[tuple]:

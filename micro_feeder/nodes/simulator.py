@@ -297,9 +297,7 @@ class Simulator(Node):
         now = time.perf_counter()
         if now - self._last_markers >= self._markers_period:
             self._last_markers = now
-            surface = self._stepper.model.surface
-            self._pub_markers.publish(messages.surface_markers(obs, self._marker_xs, surface.centers,
-                                                               surface.widths, PART_SIZE, stamp))
+            self._pub_markers.publish(self._markers.update(obs, stamp))
 
     def _publish_mode(self, mode: str) -> None:
         if mode != self._mode:
@@ -307,11 +305,12 @@ class Simulator(Node):
             self._pub_mode.publish(String(data=mode))
 
     def _configure_outputs(self) -> None:
-        """Per-model output buffers: the state messages (one joint per actuator) and the marker abscissae."""
+        """Per-model output buffers: the state messages (one joint per actuator) and the surface markers."""
         self._state_messages = messages.StateMessages(self.joints)
         surface = self._stepper.model.surface
         c, w = np.asarray(surface.centers), np.asarray(surface.widths)
-        self._marker_xs = np.linspace(float(np.min(c - 4 * w)), float(np.max(c + 4 * w)), MARKER_POINTS)
+        xs = np.linspace(float(np.min(c - 4 * w)), float(np.max(c + 4 * w)), MARKER_POINTS)
+        self._markers = messages.SurfaceMarkers(xs, surface.centers, surface.widths, PART_SIZE)
 
     # -- commands -----------------------------------------------------------------------------------
 
