@@ -5,12 +5,13 @@ time) and a controller. Phase 1, the round trip: a *responder* answers every ``p
 receives with an empty ``actuator/trajectory`` (stop = hold the strokes; harmless, they stay at 0) whose
 ``header.stamp`` is the pose's stamp, so the simulator can tell which pose each command answers (a past
 stamp starts on receipt: docs/interface.md). Phase 2, optional: the real ``feed_controller`` executable
-feeding the part to a target; each burst it sends is stamped ``command_lead`` after the pose it decided
-on, so the same measurement gives its reaction time (pose published -> burst received), a few samples.
+feeding the part to a target: for each burst, its stamp minus the sim time at which the simulator received
+it, which must stay positive (the burst then starts exactly at its stamp; a late one starts mid-stroke).
 
 Both ends are timed in the simulator's process: the driver runs the product's ``Simulator`` node there
 through a bench-only subclass (``--role simulator``) that notes the wall time (``perf_counter``) just
-before each pose is published and at the entry of the ``actuator/trajectory`` callback, then writes the
+before each pose is published and, with the sim time, at the entry of the ``actuator/trajectory``
+callback, then writes the
 samples to a JSON file when SIGINT ends it. It spins like the ``simulator`` executable (``spin_node``:
 EventsExecutor on the main thread). Children get ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST, a random
 ROS_DOMAIN_ID and a temporary ROS_LOG_DIR. Issue 6 sets no target: the figures are a report.
@@ -70,7 +71,8 @@ def run_simulator(out: Path, ros_args: list[str]) -> int:
 
         def _on_trajectory(self, msg: Any) -> None:     # before the node's lock: wall time of delivery
             stamp = msg.header.stamp
-            self.received.append((stamp.sec * 1_000_000_000 + stamp.nanosec, time.perf_counter(), len(msg.points)))
+            self.received.append((stamp.sec * 1_000_000_000 + stamp.nanosec, time.perf_counter(), len(msg.points),
+                                  round(self.stepper.t * 1e9)))
             super()._on_trajectory(msg)
 
     nodes: list[TimedSimulator] = []
@@ -181,7 +183,7 @@ def round_trips(samples: dict[str, Any], lead_ns: int, warmup: float) -> tuple[n
     sent = {int(k): t for k, t in samples['sent']}
     keys = np.array(sorted(sent))
     trips = []
-    for stamp, t_recv, knots in samples['received']:
+    for stamp, t_recv, knots, _ in samples['received']:
         i = np.searchsorted(keys, stamp - lead_ns)
         near = [keys[j] for j in (i - 1, i) if 0 <= j < keys.size and abs(keys[j] - (stamp - lead_ns)) <= 2]
         if near and near[0] > 0:
@@ -192,6 +194,13 @@ def round_trips(samples: dict[str, Any], lead_ns: int, warmup: float) -> tuple[n
         return np.zeros(0), 0, []
     published = sum(1 for t in sent.values() if kept[0][0] <= t <= kept[-1][0])
     return np.array([dt for _, dt, _ in kept]) * 1e3, published, [knots for _, _, knots in kept]
+
+
+def burst_margins(samples: dict[str, Any]) -> tuple[np.ndarray, list[int]]:
+    """For each burst: its stamp minus the sim time when the simulator received it (ms; > 0 means it arrived
+    in time and starts exactly at its stamp, < 0 means it started late, mid-trajectory), and its knots."""
+    rows = [(stamp - sim_ns, knots) for stamp, _, knots, sim_ns in samples['received'] if knots]
+    return np.array([margin for margin, _ in rows]) * 1e-6, [knots for _, knots in rows]
 
 
 def publishing(samples: dict[str, Any], warmup: float) -> tuple[float, float, float]:
@@ -250,7 +259,7 @@ def main() -> int:
             exe = shutil.which('feed_controller', path=str(Path(sys.executable).parent))
             controller = [exe, '--ros-args', '-p', 'feed.target_x:=0.2e-3', '-p', f'command_lead:={FEED_LEAD}']
             feed_samples, feed_cpu = run_phase(controller, args.feed_seconds, tmp, env, sim_args)
-            feed = (round_trips(feed_samples, round(FEED_LEAD * 1e9), 0.0), feed_cpu)
+            feed = (burst_margins(feed_samples), feed_cpu)
         load2 = os.getloadavg()
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -265,10 +274,11 @@ def main() -> int:
     print(f'    simulator while answered: {rate:.1f} poses/s, real-time factor {rtf:.4f}; CPU: simulator '
           f'{cpu["simulator"] * 100:.1f} %, responder {cpu["controller"] * 100:.1f} % of a core')
     if feed is not None:
-        (ms, _, knots), feed_cpu = feed
-        print(f'  feed controller reaction, pose published -> burst received (feed_controller executable, '
-              f'target 0.2 mm, {args.feed_seconds:g} s):')
-        print(f'    {describe(ms)} (bursts received; command_lead {FEED_LEAD * 1e3:g} ms should exceed it)')
+        (ms, knots), feed_cpu = feed
+        print(f'  feed controller bursts: stamp minus the sim time they reached the simulator (feed_controller '
+              f'executable, target 0.2 mm, {args.feed_seconds:g} s; > 0 = in time, command_lead {FEED_LEAD * 1e3:g} '
+              'ms + its build time):')
+        print(f'    {describe(ms)}; late (< 0): {int(np.sum(ms < 0))} of {ms.size}')
         print(f'    in order, ms (knots): {" ".join(f"{v:.1f} ({k})" for v, k in zip(ms, knots, strict=True))}')
         print(f'    CPU: simulator {feed_cpu["simulator"] * 100:.1f} %, feed_controller '
               f'{feed_cpu["controller"] * 100:.1f} % of a core')

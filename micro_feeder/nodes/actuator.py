@@ -45,7 +45,9 @@ def sample_waveform(params: StrokeParams, n_actuators: int, knots_per_stroke: in
 
     Knots lie on a uniform grid of ``knots_per_stroke`` per stroke period plus every segment boundary of
     every actuator (where s̈ may jump; the value there is the right-hand one), from 0 to the end of the
-    burst, so a quintic Hermite through them follows the waveform closely.
+    burst, so a quintic Hermite through them follows the waveform closely. Grid knots where every actuator
+    rests (s = ṡ = s̈ = 0, e.g. in the pauses between strokes) are left out: the boundary knots around a rest
+    are kept, and a quintic between two resting knots is exactly zero.
     """
     table = waveform_table(params, n_actuators)
     end = params.burst_end_s()
@@ -58,6 +60,9 @@ def sample_waveform(params: StrokeParams, n_actuators: int, knots_per_stroke: in
     times = np.sort(np.concatenate([grid[~near], bounds]))
     times = times[(times >= 0.0) & (times <= end * (1 + 1e-12))]
     values = np.stack([table.evaluate(float(t)) for t in times])       # (n, 3, actuators)
+    on_boundary = np.isin(times, bounds)
+    keep = on_boundary | np.any(values != 0.0, axis=(1, 2)) | (times == times[0]) | (times == times[-1])
+    times, values = times[keep], values[keep]
     return times, values[:, 0, :], values[:, 1, :], values[:, 2, :]
 
 

@@ -18,6 +18,7 @@ when it starts (that one answers no grant), so every run takes the same steps wh
 from __future__ import annotations
 
 import dataclasses
+import time
 from collections.abc import Mapping
 from typing import Any
 
@@ -77,8 +78,11 @@ class FeedController(Node):
         self._settle = self.get_parameter('settle_time').value
         self._lockstep = self.get_parameter('lockstep').value
         self._knots = self.get_parameter('knots_per_stroke').value
-        self._lead = 0.0 if self._lockstep else self.get_parameter('command_lead').value
+        self._lead = self.get_parameter('command_lead').value
         self.planner = FeedPlanner(self.goal, travelling_wave=len(self.stroke.phases) > 1)
+        # The first sampling of a waveform compiles (or loads) the JIT kernels: seconds or ~0.3 s that would
+        # delay the first burst past its stamp, so pay it now, before any state arrives.
+        sample_waveform(self.stroke, len(self.stroke.phases), self._knots)
 
         self._pub_trajectory = self.create_publisher(JointTrajectory, 'actuator/trajectory',
                                                      topic_qos('actuator/trajectory'))
@@ -154,15 +158,17 @@ class FeedController(Node):
         self._fire(burst, t, x)
 
     def _fire(self, burst: Burst, t: float, x: float) -> None:
-        """Send ``burst`` stamped to start at t + ``command_lead`` (sim time; in lockstep at t, where the
-        simulator waits) and judge the part again ``settle_time`` after the burst's end."""
+        """Send ``burst`` stamped to start at t + ``command_lead`` + the wall time spent building it (sim
+        time, real-time mode; a 20-stroke burst takes tens of ms to sample), or at t in lockstep, where the
+        simulator waits. Judge the part again ``settle_time`` after the burst's end."""
+        building = time.perf_counter()
         phases = tuple(reversed(self.stroke.phases)) if burst.reversed_wave else self.stroke.phases
         stroke = dataclasses.replace(self.stroke, amplitude=burst.amplitude_m, count=burst.count, delay=0.0,
                                      pause=self.goal.stroke_pause, phases=phases)
         n = len(stroke.phases)
-        start = t + self._lead
-        msg = messages.trajectory(joint_names(n), *sample_waveform(stroke, n, self._knots),
-                                  messages.to_time(start))
+        msg = messages.trajectory(joint_names(n), *sample_waveform(stroke, n, self._knots), Time())
+        start = t if self._lockstep else t + self._lead + (time.perf_counter() - building)
+        msg.header.stamp = messages.to_time(start)
         self._burst, self._burst_from_x = burst, x
         self._quiet_after = start + stroke.burst_end_s() + self._settle
         self.send(msg)
