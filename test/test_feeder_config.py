@@ -4,6 +4,7 @@ from pathlib import Path
 
 import pytest
 
+from micro_feeder.control.feed_planner import FeedGoal
 from micro_feeder.physics.dynamics.params import dynamics_parameter_groups
 from micro_feeder.physics.particle import ParticleParams
 from micro_feeder.settings import known_parameters, read_parameters_file
@@ -25,8 +26,8 @@ def test_config_values_equal_code_defaults():
             assert value == pytest.approx(expected, rel=1e-12), name
 
 
-def test_config_sets_every_dynamics_and_particle_parameter():
+def test_config_sets_every_dynamics_particle_and_controller_parameter():
     values = read_parameters_file(CONFIG)
-    for group in [ParticleParams, *dynamics_parameter_groups()]:
+    for group in [ParticleParams, *dynamics_parameter_groups(), FeedGoal]:
         for _, name, _ in group.specs():
             assert name in values, name
