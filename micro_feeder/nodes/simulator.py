@@ -109,6 +109,11 @@ class Simulator(Node):
 
     def __init__(self, overrides: Mapping[str, Any] | None = None, **kwargs: Any):
         super().__init__('simulator', **kwargs)
+        # First, what destroy_node() needs: rclpy destroys a node whose construction failed below (a refused
+        # parameter) at shutdown, and that must not end in an AttributeError hiding the reason.
+        self._running = threading.Event()   # set while the loop thread may tick (not paused, not stopping)
+        self._stopping = False
+        self._loop_thread: threading.Thread | None = None
         self._lock = threading.RLock()      # the stepper and the state publishers: tick thread vs executor
         self._model_specs = model_specs()
         self._specs = {**self._model_specs, **NODE_SPECS}
@@ -123,8 +128,6 @@ class Simulator(Node):
         self._publish_clock: bool = p['publish_clock']
         self._lockstep: bool = p['lockstep']
         self._paused: bool = p['start_paused'] or self._lockstep
-        self._running = threading.Event()   # set while the loop thread may tick (not paused, not stopping)
-        self._stopping = False
         self._markers_period = 1.0 / p['markers_rate']
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.add_post_set_parameters_callback(self._after_set_parameters)
@@ -163,7 +166,6 @@ class Simulator(Node):
         self._publish_parameters()
         self._publish_state([])
         self.create_timer(1.0, self._publish_diagnostics, clock=Clock(clock_type=ClockType.STEADY_TIME))
-        self._loop_thread: threading.Thread | None = None
         if not self._lockstep:
             self._set_paused(self._paused)
             self._loop_thread = threading.Thread(target=self._loop, name='simulator-loop', daemon=True)
