@@ -128,3 +128,14 @@ def test_integrals_match_adaptive_quadrature(law, d):
     assert forces.q_max[0] == pytest.approx(ref_q, rel=1e-8, abs=1e-300)
     assert forces.adhesion_noncontact[0] == pytest.approx(ref_nc, rel=1e-8)
     assert forces.adhesion_contact[0] == pytest.approx(ref_c, rel=1e-7, abs=1e-300)
+
+
+def test_separation_below_every_summit():
+    """d* below -Z_CUTOFF: every summit touches, so no non-contacting adhesion, and the contact load is the
+    fully plastic mean (3/K) E[w] = (3/K)(0 - d*)/omega_c* times the load prefactor."""
+    inp = inputs()
+    d = np.array([-40.0, -45.0])
+    forces = surface_forces(d, inp)
+    assert np.all(forces.adhesion_noncontact == 0.0)
+    prefactor = (2 / 3) * math.pi * K * inp.beta * inp.omega_c
+    np.testing.assert_allclose(forces.contact_load, prefactor * (3 / K) * (-d) / inp.omega_c, rtol=1e-9)

@@ -152,6 +152,7 @@ def test_human_table_and_plot(tmp_path):
     ('contact.beta=nan', 'contact.beta = nan is not allowed'),
     ('contact.sigm=2e-8', "unknown parameter 'contact.sigm'; did you mean contact.sigma"),
     ('contact.sigma', 'expects NAME=VALUE'),
+    ('contact.beta=1e-4', 'contact.beta = 0.0001 is not allowed: large enough for the surface to carry 1 N'),
 ])
 def test_bad_parameters_exit_2_with_a_reason(override, message):
     result = run_cli('--set', override)

@@ -12,6 +12,7 @@ import importlib
 import pkgutil
 import sys
 
+from ..physics.parameters import ParameterError
 from ..settings import SettingsError
 
 COMMAND_ORDER = ('run', 'simulate', 'sweep', 'contact', 'hil', 'info', 'plot', 'export', 'recover',
@@ -42,7 +43,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     try:
         return int(args.func(args) or 0)
-    except (CommandError, SettingsError) as err:
+    except (CommandError, SettingsError, ParameterError) as err:
         print(f'micro-feeder {args.command}: error: {err}', file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -16,6 +16,7 @@ import numpy as np
 from scipy.interpolate import PchipInterpolator
 from scipy.optimize import minimize_scalar
 
+from ..parameters import ParameterError
 from ..particle import ParticleParams
 from . import asperity
 from .params import ContactParams
@@ -120,8 +121,8 @@ class ContactModel:
         self._d_min_star = float(best.x)
         min_load = float(best.fun)
         if not min_load < 0.0:
-            raise ValueError('the applied load has no negative minimum: no adhesion (delta_gamma = 0?); '
-                             'the contact model needs some adhesion to define a pull-off force')
+            raise ParameterError('contact.delta_gamma', self.contact.delta_gamma,
+                                 'large enough for the applied load to have a negative minimum (a pull-off force)')
         self.pull_off_n = -min_load * self.force_unit_n
         self.d_pull_off_m = self._d_min_star * self.contact.sigma
 
@@ -133,7 +134,9 @@ class ContactModel:
         while self._applied_load_star(np.array([self._d_min_star - depth]))[0] < target:
             depth *= 1.5
             if depth > 60.0:
-                raise ValueError('the applied load never reaches 1 N: check contact.beta and contact.psi')
+                raise ParameterError('contact.beta', self.contact.beta,
+                                     f'large enough for the surface to carry {MAX_TABLE_LOAD_N:g} N (the load '
+                                     'tables reach it); with these inputs it never does')
         u = np.linspace(0.0, 1.0, STABLE_BRANCH_POINTS)
         d_star = self._d_min_star - depth * u ** 1.5
         self.stable_branch = self.curve(d_star * self.contact.sigma)

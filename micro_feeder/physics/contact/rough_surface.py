@@ -144,9 +144,10 @@ def _contacting_integrals(d: np.ndarray, inputs: DimensionlessInputs) -> np.ndar
 
 
 def _noncontacting_near(d: np.ndarray, epsilon: float) -> np.ndarray:
-    """int_{-inf}^{d} J_nc dz* / (phi-weighted), by nodes in the gap g = d - z graded from eps*."""
-    if d.size == 0:
-        return d.copy()
+    """int_{-inf}^{d} J_nc dz* / (phi-weighted), by nodes in the gap g = d - z graded from eps*.
+    Zero for d* <= -Z_CUTOFF: every summit is then in contact."""
+    if d.size == 0 or d.max() <= -Z_CUTOFF:
+        return np.zeros_like(d)
     g_max = d.max() + Z_CUTOFF
     gap, weights = gauss_nodes(graded_breaks(0.0, g_max, 0.25 * epsilon, 1.0))
     kernel = asperity.noncontacting_adhesion_ratio(gap / epsilon) * weights
