@@ -7,7 +7,7 @@ import sys
 import warnings
 from pathlib import Path
 
-from ..logs.reader import LogReader, TruncatedLogWarning
+from ..logs.reader import LogFormatError, LogReader, TruncatedLogWarning
 from . import CommandError
 
 
@@ -17,7 +17,7 @@ def open_log(path: str) -> LogReader:
         warnings.simplefilter('always', TruncatedLogWarning)
         try:
             log = LogReader(Path(path))
-        except (FileNotFoundError, NotADirectoryError) as err:
+        except (OSError, LogFormatError) as err:
             raise CommandError(str(err)) from None
     for w in caught:
         print(f'warning: {w.message}', file=sys.stderr)

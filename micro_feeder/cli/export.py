@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ..logs.export import export_csv
+from . import CommandError
 from ._logs import open_log
 
 
@@ -20,6 +21,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    for path in export_csv(open_log(args.log), args.csv, args.topics):
+    log = open_log(args.log)
+    try:
+        paths = export_csv(log, args.csv, args.topics)
+    except OSError as err:
+        raise CommandError(f'cannot write {args.csv}: {err}') from None
+    for path in paths:
         print(path)
     return 0

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from . import CommandError
 from ._logs import open_log
 
 
@@ -19,5 +20,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..logs.plot import plot_log  # matplotlib only when plotting
 
-    print(f'wrote {plot_log(open_log(args.log), args.output)}')
+    log = open_log(args.log)
+    try:
+        path = plot_log(log, args.output)
+    except OSError as err:
+        raise CommandError(f'cannot write {args.output}: {err}') from None
+    print(f'wrote {path}')
     return 0

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from ..logs.metadata import LogFormatError
 from ..logs.recover import recover
 from . import CommandError
 
@@ -20,7 +21,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     try:
         result = recover(args.broken, args.output)
-    except (FileNotFoundError, FileExistsError) as err:
+    except (OSError, LogFormatError) as err:
         raise CommandError(str(err)) from None
     state = (f'{len(result.truncated)} truncated file(s) read to their last whole chunk'
              if result.truncated else 'the source was complete')

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import argparse
+import math
+
+from . import CommandError
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -20,7 +23,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
+def _check(args: argparse.Namespace) -> None:
+    """Refuse what the replay node would refuse, with the option's name."""
+    if not 0.01 <= args.rate <= 100.0:
+        raise CommandError(f'--rate {args.rate}: must be within [0.01, 100]')
+    if not (math.isfinite(args.start_offset) and 0.0 <= args.start_offset <= 1e9):
+        raise CommandError(f'--start-offset {args.start_offset}: must be within [0, 1e9] s')
+    for rule in args.remap:
+        source, sep, target = rule.partition(':=')
+        if not (sep and source and target):
+            raise CommandError(f'--remap {rule}: must be FROM:=TO')
+
+
 def run(args: argparse.Namespace) -> int:
+    _check(args)
     from ..nodes.replay import main as replay_main  # rclpy only when replaying
 
     def strings(values: list[str]) -> str:

@@ -112,11 +112,23 @@ class BagMetadata:
         tmp.replace(directory / METADATA_FILE)
 
 
+class LogFormatError(ValueError):
+    """A file that is not a log (not MCAP, or a ``metadata.yaml`` that is not rosbag2's)."""
+
+
 def read_file_list(directory: Path) -> list[Path] | None:
     """The MCAP files ``metadata.yaml`` lists, or None when the directory has none (a crashed
-    recording)."""
+    recording); :class:`LogFormatError` when the file is not rosbag2 metadata."""
     path = directory / METADATA_FILE
     if not path.is_file():
         return None
-    info = yaml.safe_load(path.read_text())['rosbag2_bagfile_information']
-    return [directory / Path(p).name for p in info['relative_file_paths']]
+    try:
+        document = yaml.safe_load(path.read_text())
+    except (yaml.YAMLError, UnicodeDecodeError) as err:
+        raise LogFormatError(f'{path} is not rosbag2 metadata (not YAML: {err})') from None
+    info = document.get('rosbag2_bagfile_information') if isinstance(document, dict) else None
+    files = info.get('relative_file_paths') if isinstance(info, dict) else None
+    if not isinstance(files, list) or not all(isinstance(p, str) for p in files):
+        raise LogFormatError(f'{path} is not rosbag2 metadata (no rosbag2_bagfile_information with '
+                             'relative_file_paths): not a log')
+    return [directory / Path(p).name for p in files]

@@ -14,6 +14,7 @@ Example, what ``resim`` needs::
 
 from __future__ import annotations
 
+import struct
 import warnings
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
@@ -25,10 +26,13 @@ from mcap.reader import NonSeekingReader, make_reader
 from mcap.records import Channel, Message, Schema
 from mcap_ros2.decoder import DecoderFactory
 
-from .metadata import read_file_list
+from .metadata import LogFormatError, read_file_list
 from .writer import RECORDER_METADATA
 
-READ_ERRORS = (McapError, EOFError, ValueError, OSError)
+READ_ERRORS = (McapError, EOFError, ValueError, OSError, struct.error)
+MAGIC = b'\x89MCAP0\r\n'  # the first 8 bytes of every MCAP file
+
+__all__ = ['READ_ERRORS', 'LogFormatError', 'LogMessage', 'LogReader', 'LogTopic', 'TruncatedLogWarning']
 
 
 class TruncatedLogWarning(UserWarning):
@@ -188,6 +192,12 @@ class LogReader:
 
     def _index_file(self, path: Path) -> _FileIndex:
         with open(path, 'rb') as stream:
+            head = stream.read(len(MAGIC))
+            # A file cut before the end of its magic (even empty) is a truncated log; anything else that
+            # does not start with the magic is not a log at all.
+            if not MAGIC.startswith(head):
+                raise LogFormatError(f'{path} is not an MCAP file (no MCAP magic at its start): not a log')
+            stream.seek(0)
             try:
                 reader = make_reader(stream)
                 summary = reader.get_summary()

@@ -29,6 +29,7 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 from rclpy.context import Context
 from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.exceptions import ParameterException
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
@@ -198,7 +199,7 @@ def main(args: list[str] | None = None) -> int:
     stop = StopFlag().install()
     try:
         node = Recorder()
-    except (ValueError, FileExistsError) as err:
+    except (ValueError, OSError, ParameterException) as err:
         print(f'recorder: error: {err}', file=sys.stderr)
         rclpy.shutdown()
         return 2

@@ -17,6 +17,7 @@ import numpy as np
 import rclpy
 from rcl_interfaces.msg import FloatingPointRange, ParameterDescriptor, ParameterType
 from rclpy.context import Context
+from rclpy.exceptions import ParameterException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
@@ -71,7 +72,12 @@ class Replay(Node):
         names = [r for r in map(self.log.resolve, wanted) if r] if wanted else list(self.log.topics)
         if p['publish_clock']:
             names = [n for n in names if n != '/clock']
-        remap = dict(r.split(':=', 1) for r in p['remap'] if r)
+        remap = {}
+        for rule in (r for r in p['remap'] if r):
+            source, sep, target = rule.partition(':=')
+            if not (sep and source and target):
+                raise ValueError(f'remap "{rule}" is not FROM:=TO')
+            remap[source] = target
         self.topics = names
         self._outputs = {}
         for name in names:
@@ -170,7 +176,7 @@ def main(args: list[str] | None = None) -> int:
     stop = StopFlag().install()
     try:
         node = Replay()
-    except (ValueError, FileNotFoundError) as err:
+    except (ValueError, OSError, ParameterException) as err:
         print(f'replay: error: {err}', file=sys.stderr)
         rclpy.shutdown()
         return 2
