@@ -6,6 +6,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
+import pytest
 import rclpy
 from geometry_msgs.msg import PoseStamped
 from log_fixtures import write_motion_log
@@ -14,6 +15,7 @@ from rclpy.parameter import Parameter
 from ros_helpers import wait_until
 from std_srvs.srv import SetBool
 
+from micro_feeder.nodes import replay as replay_module
 from micro_feeder.nodes.replay import Replay
 
 N = 300  # messages per topic, 1 ms apart: 0.3 s of log
@@ -76,3 +78,76 @@ def test_filter_remap_rate_and_pause(ros_context, tmp_path):
     arrival = np.asarray([t for t, _ in got])
     assert arrival[-1] - arrival[0] > 0.3  # the pause held playback
     assert np.percentile(replay.timing_errors, 99) < 0.025
+
+
+def test_relative_remap_source_is_resolved(ros_context, tmp_path):
+    poses = write_motion_log(tmp_path / 'log', n=N)
+    _, got = run_replay(ros_context, tmp_path / 'log', [
+        Parameter('topics', value=['particle/pose']), Parameter('remap', value=['particle/pose:=/copy']),
+        Parameter('rate', value=4.0)], topic='/copy')
+    assert [data for _, data in got] == poses
+
+
+def test_unknown_topic_or_remap_source_is_refused(ros_context, tmp_path):
+    write_motion_log(tmp_path / 'log', n=10)
+    for overrides, reason in (([Parameter('topics', value=['particle/nope'])], 'topic "particle/nope"'),
+                              ([Parameter('remap', value=['/nope:=/copy'])], 'remap "/nope"')):
+        with pytest.raises(ValueError, match=reason):
+            Replay(context=ros_context, parameter_overrides=[Parameter('log', value=str(tmp_path / 'log')),
+                                                             *overrides])
+
+
+@pytest.mark.parametrize('overrides', [
+    [Parameter('start_offset', value=10.0)],  # past the end of a 0.3 s log
+    [Parameter('topics', value=['/clock']), Parameter('publish_clock', value=True)],  # nothing left
+], ids=['offset-past-end', 'no-topic-left'])
+def test_loop_with_nothing_to_publish_stops_with_a_reason(ros_context, tmp_path, overrides):
+    write_motion_log(tmp_path / 'log', n=N)
+    from log_fixtures import one_of_each, type_name
+    from rclpy.serialization import serialize_message
+
+    from micro_feeder.logs.writer import LogWriter
+    if any(p.name == 'publish_clock' for p in overrides):  # a log holding /clock only
+        writer = LogWriter(tmp_path / 'clock.mcap')
+        clock = one_of_each()['/clock']
+        writer.add_topic('/clock', type_name(clock))
+        writer.write('/clock', serialize_message(clock), 1)
+        writer.close()
+        log = tmp_path / 'clock.mcap'
+    else:
+        log = tmp_path / 'log'
+    replay = Replay(context=ros_context, parameter_overrides=[
+        Parameter('log', value=str(log)), Parameter('loop', value=True), *overrides])
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(replay)
+    try:
+        replay.start()
+        wait_until(replay.finished.done, 5, executor=executor, what='replay stopped')
+        assert replay.published == 0
+        assert replay.error and 'nothing to publish' in replay.error
+    finally:
+        replay.close()
+        executor.shutdown()
+        replay.destroy_node()
+
+
+def test_loop_keeps_a_bounded_window_of_timing_errors(ros_context, tmp_path, monkeypatch):
+    monkeypatch.setattr(replay_module, 'TIMING_WINDOW', 100)
+    write_motion_log(tmp_path / 'log', n=50)
+    replay = Replay(context=ros_context, parameter_overrides=[
+        Parameter('log', value=str(tmp_path / 'log')), Parameter('loop', value=True),
+        Parameter('rate', value=20.0)])
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(replay)
+    try:
+        replay.start()
+        wait_until(lambda: replay.published > 400, 10, executor=executor, what='several passes')
+    finally:
+        replay.close()
+        executor.shutdown()
+        replay.destroy_node()
+    assert len(replay.timing_errors) == 100
+    assert replay.timing_count == replay.published > 400
+    assert replay.timing_max >= max(replay.timing_errors)
+    report = replay.timing_report()
+    assert report.startswith(f'{replay.published} messages') and 'of the last 100' in report

@@ -3,7 +3,9 @@
 Messages are published as recorded CDR bytes (no decode), each with the QoS its publisher offered when
 the log stored it (``offered_qos_profiles``; reliable, volatile, depth 100 otherwise). A player thread
 sleeps until each message's due time (coarse sleep, then a short busy wait) and records its own timing
-error: actual publish time minus due time [s]. The executor, on the main thread, serves
+error: actual publish time minus due time [s] (the last ``TIMING_WINDOW`` of them, with the count and the
+maximum over the whole run, so that ``loop`` runs in bounded memory). A pass that has nothing to publish
+ends the replay with ``error`` set instead of looping on nothing. The executor, on the main thread, serves
 ``replay/pause`` (std_srvs/SetBool) and the optional ``/clock`` (playback log time) timer.
 """
 
@@ -12,6 +14,7 @@ from __future__ import annotations
 import sys
 import threading
 import time
+from collections import deque
 
 import numpy as np
 import rclpy
@@ -32,6 +35,7 @@ from ._ros import StopFlag, message_class, qos_from_dict, spin_until
 
 DEFAULT_QOS = QoSProfile(depth=100)
 BUSY_WAIT = 0.002  # s: last stretch before a due time spent polling the clock instead of sleeping
+TIMING_WINDOW = 100_000  # timing errors kept for the percentiles (the latest ones)
 
 
 def _descriptor(description: str, type_: int, float_range: tuple[float, float] | None = None
@@ -69,7 +73,7 @@ class Replay(Node):
         self.rate, self.loop = p['rate'], p['loop']
         self.start_ns = self.log.start_ns + int(p['start_offset'] * 1e9)
         wanted = [t for t in p['topics'] if t]
-        names = [r for r in map(self.log.resolve, wanted) if r] if wanted else list(self.log.topics)
+        names = [self._recorded(t, 'topic') for t in wanted] if wanted else list(self.log.topics)
         if p['publish_clock']:
             names = [n for n in names if n != '/clock']
         remap = {}
@@ -77,7 +81,7 @@ class Replay(Node):
             source, sep, target = rule.partition(':=')
             if not (sep and source and target):
                 raise ValueError(f'remap "{rule}" is not FROM:=TO')
-            remap[source] = target
+            remap[self._recorded(source, 'remap')] = target
         self.topics = names
         self._outputs = {}
         for name in names:
@@ -85,8 +89,12 @@ class Replay(Node):
             offered = parse_qos(topic.metadata.get('offered_qos_profiles', ''))
             qos = qos_from_dict(offered[0], DEFAULT_QOS) if offered else DEFAULT_QOS
             self._outputs[name] = self.create_publisher(message_class(topic.type), remap.get(name, name), qos)
-        self.timing_errors: list[float] = []
+        self.timing_errors: deque[float] = deque(maxlen=TIMING_WINDOW)  # the latest ones [s]
+        self.timing_count = 0  # over the whole run
+        self.timing_max = float('-inf')  # over the whole run [s]
         self.published = 0
+        self.error: str | None = None  # why the replay stopped early (a pass had nothing to publish)
+        self._start_offset = p['start_offset']
         self.finished = Future()
         self.playback_ns = self.start_ns
         self._paused_since: float | None = None
@@ -95,9 +103,18 @@ class Replay(Node):
         self._lock = threading.Lock()
         self.create_service(SetBool, 'replay/pause', self._on_pause)
         if p['publish_clock']:
-            self._clock = self.create_publisher(Clock, '/clock', 10)
+            self._clock_pub = self.create_publisher(Clock, '/clock', 10)
             self.create_timer(1.0 / p['clock_frequency'], self._publish_clock)
         self._thread = threading.Thread(target=self._play, name='replay-player', daemon=True)
+
+    def _recorded(self, name: str, what: str) -> str:
+        """The recorded name of ``name`` (relative names resolved as the reader does); ValueError when
+        the log has no such topic."""
+        resolved = self.log.resolve(name)
+        if resolved is None:
+            raise ValueError(f'{what} "{name}": no such topic in {self.log.path} '
+                             f'(it has {", ".join(sorted(self.log.topics)) or "no topic"})')
+        return resolved
 
     def start(self) -> None:
         """Start playing (publishers should be matched first if nothing may be missed)."""
@@ -108,14 +125,24 @@ class Replay(Node):
             origin = time.monotonic()
             with self._lock:
                 self._pause_shift = 0.0
+            published = 0
             for m in self.log.messages(self.topics, start_ns=self.start_ns):
                 due = origin + (m.log_time_ns - self.start_ns) * 1e-9 / self.rate
                 if not self._wait_until(due):
                     return
                 self._outputs[m.topic].publish(m.data)
-                self.timing_errors.append(time.monotonic() - due - self._pause_shift)
+                error = time.monotonic() - due - self._pause_shift
+                self.timing_errors.append(error)
+                self.timing_count += 1
+                self.timing_max = max(self.timing_max, error)
                 self.playback_ns = m.log_time_ns
                 self.published += 1
+                published += 1
+            if not published:
+                self.error = (f'nothing to publish: no message of {", ".join(self.topics) or "any topic"} at or '
+                              f'after start_offset {self._start_offset:g} s (the log spans '
+                              f'{self.log.duration:.3f} s)')
+                break
             if not self.loop:
                 break
         self.finished.set_result(True)
@@ -153,15 +180,16 @@ class Replay(Node):
     def _publish_clock(self) -> None:
         msg = Clock()
         msg.clock.sec, msg.clock.nanosec = divmod(self.playback_ns, 1_000_000_000)
-        self._clock.publish(msg)
+        self._clock_pub.publish(msg)
 
     def timing_report(self) -> str:
         """p50/p99/max of the publish timing error [ms]."""
-        if not self.timing_errors:
+        if not self.timing_count:
             return 'no message published'
         e = np.asarray(self.timing_errors) * 1e3
-        return (f'{len(e)} messages, timing error p50 {np.percentile(e, 50):.3f} ms, '
-                f'p99 {np.percentile(e, 99):.3f} ms, max {e.max():.3f} ms')
+        window = '' if len(e) == self.timing_count else f' (p50/p99 of the last {len(e)})'
+        return (f'{self.timing_count} messages, timing error p50 {np.percentile(e, 50):.3f} ms, '
+                f'p99 {np.percentile(e, 99):.3f} ms, max {self.timing_max * 1e3:.3f} ms{window}')
 
     def close(self) -> None:
         """Stop the player thread."""
@@ -191,6 +219,9 @@ def main(args: list[str] | None = None) -> int:
         executor.shutdown()
         node.destroy_node()
         rclpy.shutdown()
+    if node.error:
+        print(f'replay: error: {node.error}', file=sys.stderr)
+        return 2
     return 0
 
 
