@@ -3,6 +3,7 @@ measures its timing error, honours topic filter, remap and pause."""
 
 from __future__ import annotations
 
+import os
 import time
 
 import numpy as np
@@ -151,3 +152,22 @@ def test_loop_keeps_a_bounded_window_of_timing_errors(ros_context, tmp_path, mon
     assert replay.timing_max >= max(replay.timing_errors)
     report = replay.timing_report()
     assert report.startswith(f'{replay.published} messages') and 'of the last 100' in report
+
+
+@pytest.mark.parametrize(('preset', 'expected'), [(None, 'LOCALHOST'), ('SUBNET', 'SUBNET')])
+def test_cli_keeps_traffic_on_the_host_unless_the_user_says_otherwise(monkeypatch, tmp_path, preset, expected):
+    from micro_feeder.cli import main as cli_main
+
+    seen = {}
+
+    def fake_main(args):
+        seen['range'] = os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE')
+        return 0
+
+    if preset is None:
+        monkeypatch.delenv('ROS_AUTOMATIC_DISCOVERY_RANGE', raising=False)
+    else:
+        monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', preset)
+    monkeypatch.setattr(replay_module, 'main', fake_main)
+    assert cli_main(['replay', str(tmp_path / 'log')]) == 0
+    assert seen['range'] == expected

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 
 from . import CommandError
 
@@ -37,7 +38,9 @@ def _check(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     _check(args)
-    from ..nodes.replay import main as replay_main  # rclpy only when replaying
+    # DESIGN §2: ROS traffic stays on this host unless the user sets the range (rcl reads it at init).
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    from ..nodes.replay import main as replay_main  # rclpy only when replaying, after the environment
 
     def strings(values: list[str]) -> str:
         return '[' + ','.join(f'"{v}"' for v in values) + ']' if values else '[""]'
