@@ -166,3 +166,8 @@ def test_a_slow_controller_reaches_the_same_state_in_lockstep(ros_context: Conte
             sim.destroy_node()
     assert finals[0.0][0] == 'reached' and finals[0.0][4] >= 2
     assert finals[0.02] == finals[0.0]
+
+
+def test_timeout_stops_at_the_requested_sim_time():
+    result = run_hil('--timeout', '0.01', '--set', 'feed.target_x=0.9e-3')
+    assert not result['reached'] and result['sim_time_s'] == 0.01, result

@@ -382,3 +382,29 @@ def test_stepped_runs_are_bit_identical() -> None:
     assert len(runs[0]) == 8
     assert runs[0] == runs[1]
     assert len({row[2] for row in runs[0]}) > 1          # the part moved
+
+
+@pytest.mark.parametrize('rtf', [0.0, 1.0])
+def test_stop_at_ends_exactly_at_the_requested_sim_time(ros_context: Context, rtf: float) -> None:
+    rig = Rig(ros_context, real_time_factor=rtf)
+    try:
+        end = rig.sim.stop_at(0.05)
+        rig.wait(end.done, 'stop_at future completed')
+        time.sleep(0.05)     # the loop thread keeps ticking: sim time must stay at the end
+        assert end.result() == rig.sim.stepper.t == 0.05
+        assert rig.sim.paused
+    finally:
+        rig.close()
+
+
+def test_stop_at_bounds_lockstep_grants(ros_context: Context) -> None:
+    rig = Rig(ros_context, lockstep=True, step_period=STEP)
+    try:
+        end = rig.sim.stop_at(2.5 * STEP)
+        for _ in range(5):
+            rig.sim.grant_step()
+        assert end.done() and rig.sim.stepper.t == end.result() == 2.5 * STEP
+        ok, message = rig.sim.grant_step()
+        assert not ok and 'stopped' in message and rig.sim.stepper.t == 2.5 * STEP
+    finally:
+        rig.close()

@@ -14,6 +14,7 @@ from . import CommandError
 N = TypeVar('N')
 
 
+
 class RosSession:
     """What a command builds its nodes with; see :func:`ros_session`."""
 
@@ -39,10 +40,20 @@ class RosSession:
         self.nodes.append(node)
         return node
 
-    def spin(self, done: Callable[[], bool]) -> None:
-        """Spin every node until ``done()`` or Ctrl-C/SIGTERM."""
-        from ..nodes.spin import spin_nodes
-        spin_nodes(self.nodes, lambda: bool(self.stop) or done(), self.context)
+    def spin(self, done: Callable[[], bool], future: Any = None) -> None:
+        """Spin every node in one EventsExecutor until ``done()`` or Ctrl-C/SIGTERM; ``future`` (an rclpy
+        Future) completing ends the spin too, without waiting for the next check of ``done()``."""
+        from rclpy.experimental import EventsExecutor
+
+        from ..nodes._ros import spin_until
+        executor = EventsExecutor(context=self.context)
+        for node in self.nodes:
+            executor.add_node(node)
+        try:
+            spin_until(executor, lambda: bool(self.stop) or done() or (future is not None and future.done()),
+                       future)
+        finally:
+            executor.shutdown()
 
     def close_log(self) -> str | None:
         """Finish the recording (summary, metadata.yaml); returns its path."""

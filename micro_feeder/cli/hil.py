@@ -50,9 +50,11 @@ def run(args: argparse.Namespace) -> int:
             session.spin(lambda: all(sim.count_subscribers(topic) > 0 for topic in RECORDED_BEFORE_START))
         controller = session.add(lambda: FeedController(context=session.context,
                                                         overrides={**flat, 'lockstep': args.lockstep}))
+        end = sim.stop_at(args.timeout)
         start = time.perf_counter()
-        session.spin(lambda: controller.done or bool(sim.error) or sim.stepper.t >= args.timeout)
+        session.spin(lambda: controller.done or bool(sim.error), end)
         wall = time.perf_counter() - start
+        sim.pause()     # the loop thread no longer advances the state the outcome reads
         result = outcome(sim, controller, wall, session.close_log())
     if args.json:
         print(json.dumps(result))

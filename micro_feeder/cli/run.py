@@ -73,9 +73,11 @@ def run(args: argparse.Namespace) -> int:
         tty: TextIO | None = sys.stderr if sys.stderr.isatty() else None
         if tty is not None:
             sim.create_timer(STATUS_PERIOD, lambda: print('\r' + status_line(sim), end='', file=tty, flush=True))
+        end = sim.stop_at(args.duration) if args.duration is not None else None
         start = time.perf_counter()
-        session.spin(lambda: bool(sim.error) or (args.duration is not None and sim.stepper.t >= args.duration))
+        session.spin(lambda: bool(sim.error), end)
         wall = time.perf_counter() - start
+        sim.pause()     # the loop thread no longer advances the state the summary reads
         if tty is not None:
             print('\r' + status_line(sim), file=tty)
         print(summary(sim, actuator, wall, session.close_log()))

@@ -44,6 +44,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.task import Future
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, Header, String
@@ -115,6 +116,8 @@ class Simulator(Node):
         self._stopping = False
         self._loop_thread: threading.Thread | None = None
         self._lock = threading.RLock()      # the stepper and the state publishers: tick thread vs executor
+        self._t_end = math.inf              # stop_at(): sim time never advances past this
+        self._stopped_at: Future | None = None
         self._model_specs = model_specs()
         self._specs = {**self._model_specs, **NODE_SPECS}
         declare(self, self._specs, overrides)
@@ -196,12 +199,31 @@ class Simulator(Node):
     @locked
     def grant_step(self) -> tuple[bool, str]:
         """Advance one ``step_period`` and publish: what ``simulator/step`` does. Only while paused (always,
-        in lockstep) and not after a simulation failure. Returns (success, message)."""
+        in lockstep), not after a simulation failure and not past :meth:`stop_at`'s end.
+        Returns (success, message)."""
         if not self._paused or self.error:
             return False, self.error or 'step needs the simulation paused (call simulator/pause true)'
+        if self._stepper.t >= self._t_end:
+            return False, f'stopped at t = {self._stepper.t:.9f} s (end of the run)'
         self.steps_granted += 1
         self._step(self._stepper.t + self._step_period)
         return not self.error, self.error or f't = {self._stepper.t:.9f} s'
+
+    @locked
+    def stop_at(self, t_end: float) -> Future:
+        """Never advance sim time past ``t_end`` (s): the loop (or a lockstep grant) stops exactly there and
+        pauses; the returned future completes when sim time reaches it (at once if it already has)."""
+        self._t_end = t_end
+        self._stopped_at = Future()
+        self._check_end()
+        return self._stopped_at
+
+    @locked
+    def pause(self) -> None:
+        """Stop the wall-clock loop advancing sim time (after the tick in progress, if any): the state is
+        final until something resumes it. Lockstep is always paused."""
+        if not self._lockstep:
+            self._set_paused(True)
 
     def destroy_node(self) -> None:
         """Stop and join the loop thread, then destroy the node (publishers last)."""
@@ -266,13 +288,23 @@ class Simulator(Node):
             self.overruns += 1
 
     def _step(self, t_target: float) -> None:
-        """Advance to ``t_target`` and publish; on a simulation failure pause and report it."""
+        """Advance to ``t_target`` (never past :meth:`stop_at`'s end) and publish; on a simulation failure
+        pause and report it."""
         try:
-            events = self._stepper.advance(t_target)
+            events = self._stepper.advance(min(t_target, self._t_end))
         except SimulationError as err:
             self._fail(str(err))
             return
         self._publish_state(events)
+        self._check_end()
+
+    def _check_end(self) -> None:
+        """At :meth:`stop_at`'s end: pause and complete its future."""
+        if self._stepper.t >= self._t_end and self._stopped_at is not None:
+            if not self._lockstep:
+                self._set_paused(True)
+            if not self._stopped_at.done():
+                self._stopped_at.set_result(self._stepper.t)
 
     @locked
     def _fail(self, error: str) -> None:
