@@ -56,7 +56,12 @@ def sample_waveform(params: StrokeParams, n_actuators: int, knots_per_stroke: in
               for k in range(n_actuators) for j in range(int(table.count[k]))]
     bounds = np.unique(np.concatenate(bounds))          # computed as the kernel computes them: exact
     bounds = bounds[np.concatenate([[True], np.diff(bounds) > 1e-12])]
-    near = np.min(np.abs(grid[:, None] - bounds[None, :]), axis=1) <= 1e-12
+    # Distance from each grid time to its nearest bound (bounds are sorted): the bound at or after it
+    # and the one before; O((grid + bounds) log bounds) instead of a grid × bounds matrix.
+    right = np.searchsorted(bounds, grid)
+    after = np.abs(grid - bounds[np.minimum(right, len(bounds) - 1)])
+    before = np.abs(grid - bounds[np.maximum(right - 1, 0)])
+    near = np.minimum(after, before) <= 1e-12
     times = np.sort(np.concatenate([grid[~near], bounds]))
     times = times[(times >= 0.0) & (times <= end * (1 + 1e-12))]
     values = np.stack([table.evaluate(float(t)) for t in times])       # (n, 3, actuators)
