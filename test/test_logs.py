@@ -134,3 +134,14 @@ def test_summary_export_and_plot(tmp_path):
     assert float(rows[-1]['pose.position.x']) == pytest.approx(299e-6)
     png = plot_log(log, tmp_path / 'plot.png')
     assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n' and png.stat().st_size > 10_000
+
+
+def test_message_is_decoded_once(tmp_path):
+    write_motion_log(tmp_path / 'log', n=3)
+    m = next(LogReader(tmp_path / 'log').messages(['particle/pose']))
+    calls = []
+    decode = m.decode
+    m.decode = lambda data: calls.append(data) or decode(data)
+    first = m.message
+    assert m.message is first and first.pose.position.x == 0.0
+    assert len(calls) == 1

@@ -167,3 +167,20 @@ def test_info_says_how_the_simulator_ran(stepped_log: Path) -> None:
     text = format_summary(summary)
     assert f'stepped through simulator/step, {STEP:g} s per step; 6 commands received' in text
     assert '– 0.026000 s (particle/pose stamps)' in text
+
+
+def test_resim_decodes_each_message_once(stepped_log: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    created, decoded = [0], [0]
+    make = LogReader._message
+
+    def counting(self, *record):
+        m = make(self, *record)
+        created[0] += 1
+        decode = m.decode
+        m.decode = lambda data: (decoded.__setitem__(0, decoded[0] + 1), decode(data))[1]
+        return m
+
+    monkeypatch.setattr(LogReader, '_message', counting)
+    report = resimulate(LogReader(stepped_log))
+    assert report.identical and created[0] > report.poses
+    assert 0 < decoded[0] <= created[0]

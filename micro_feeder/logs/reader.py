@@ -35,6 +35,9 @@ MAGIC = b'\x89MCAP0\r\n'  # the first 8 bytes of every MCAP file
 __all__ = ['READ_ERRORS', 'LogFormatError', 'LogMessage', 'LogReader', 'LogTopic', 'TruncatedLogWarning']
 
 
+_UNDECODED = object()  # LogMessage.message not decoded yet
+
+
 class TruncatedLogWarning(UserWarning):
     """A log file has no summary (its writer was killed): read up to its last whole chunk."""
 
@@ -50,11 +53,14 @@ class LogMessage:
     publish_time_ns: int
     data: bytes
     decode: Callable[[bytes], Any] = field(repr=False)
+    _decoded: Any = field(default=_UNDECODED, init=False, repr=False, compare=False)
 
     @property
     def message(self) -> Any:
-        """The decoded message (attributes named as the ROS message's fields)."""
-        return self.decode(self.data)
+        """The decoded message (attributes named as the ROS message's fields), decoded once."""
+        if self._decoded is _UNDECODED:
+            self._decoded = self.decode(self.data)
+        return self._decoded
 
     @property
     def log_time(self) -> float:
