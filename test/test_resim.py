@@ -25,7 +25,7 @@ from micro_feeder.nodes import messages
 from micro_feeder.nodes.actuator import sample_waveform
 from micro_feeder.nodes.commands import joint_names
 from micro_feeder.nodes.recorder import Recorder
-from micro_feeder.nodes.resim import resimulate, stop_times
+from micro_feeder.nodes.resim import ResimError, resimulate, stop_times
 from micro_feeder.nodes.simulator import Simulator
 from micro_feeder.physics.waveforms import StrokeParams
 
@@ -184,3 +184,47 @@ def test_resim_decodes_each_message_once(stepped_log: Path, monkeypatch: pytest.
     report = resimulate(LogReader(stepped_log))
     assert report.identical and created[0] > report.poses
     assert 0 < decoded[0] <= created[0]
+
+
+def _jittered_log(path: Path, offset: float = 0.0) -> None:
+    """Poses at wall-clock-like stamps (not sums of step periods), at the defaults' resting motion
+    (no command), re-simulated exactly when ``offset`` is 0."""
+    from geometry_msgs.msg import PoseStamped
+    from rclpy.serialization import serialize_message
+
+    from micro_feeder.logs.writer import LogWriter
+    from micro_feeder.nodes.parameters import model_specs
+    from micro_feeder.nodes.stepper import Stepper, build_model
+
+    stepper = Stepper(build_model({name: default for name, (_, default) in model_specs().items()}))
+    writer = LogWriter(path)
+    writer.add_topic('/particle/pose', 'geometry_msgs/msg/PoseStamped')
+    for ns in (1_000_370, 2_001_020, 3_000_910):
+        stepper.advance(ns / 1e9)
+        obs = stepper.observe()
+        msg = PoseStamped()
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(ns, 1_000_000_000)
+        msg.pose.position.x, msg.pose.position.z = obs.x + offset, obs.z
+        writer.write('/particle/pose', serialize_message(msg), ns, ns)
+    writer.close()
+
+
+def test_real_time_note_only_with_a_difference(tmp_path: Path) -> None:
+    _jittered_log(tmp_path / 'same')
+    report = resimulate(LogReader(tmp_path / 'same'))
+    assert not report.exact_stop_times and report.identical, report.verdict()
+    assert not any('real-time run' in note for note in report.notes), report.notes
+    _jittered_log(tmp_path / 'off', offset=1e-12)
+    report = resimulate(LogReader(tmp_path / 'off'))
+    assert not report.identical and any('real-time run' in note for note in report.notes), report.notes
+
+
+def test_resim_refuses_non_model_overrides(stepped_log: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert cli_main(['resim', str(stepped_log), '--set', 'feed.target_x=1']) == 2
+    assert '--set feed.target_x: not a model parameter' in capsys.readouterr().err
+    with pytest.raises(ResimError, match='feed.target_x'):
+        resimulate(LogReader(stepped_log), {'feed.target_x': 1.0})
+    # a shared scenario file (feed controller settings included) still applies its model parameters
+    config = Path(__file__).resolve().parents[1] / 'config' / 'feeder.yaml'
+    assert cli_main(['resim', str(stepped_log), '--params', str(config), '--json']) in (0, 1)
+    assert not any(name.startswith('feed.') for name in json.loads(capsys.readouterr().out)['overrides'])

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 
+from ..settings import parse_override
 from . import CommandError
 from ._common import add_model_options, settings_from_args
 from ._logs import open_log
@@ -28,9 +29,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..nodes.parameters import model_specs
     from ..nodes.resim import ResimError, resimulate  # the Stepper: numba kernel, message packages
 
+    model = model_specs()
     overrides = settings_from_args(args)
+    for text in args.overrides:
+        name = parse_override(text)[0]
+        if name not in model:
+            raise CommandError(f'--set {name}: not a model parameter (resim changes only the simulated model; '
+                               'the feed controller\'s feed.* settings do not apply)')
+    # A parameters file may also hold other nodes' settings (config/feeder.yaml: feed.*): only the model's apply.
+    overrides = {name: value for name, value in overrides.items() if name in model}
     log = open_log(args.log)
     try:
         report = resimulate(log, overrides)

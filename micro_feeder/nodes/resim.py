@@ -225,15 +225,20 @@ def _apply(stepper: Stepper, cmd: _Command) -> bool:
 def resimulate(log: LogReader, overrides: Mapping[str, Any] | None = None) -> ResimReport:
     """Re-simulate ``log`` (with model parameters ``overrides`` on top of the recorded ones) and compare.
 
-    Raises :class:`ResimError` when the log has no pose or its parameters build no model.
+    Raises :class:`ResimError` when the log has no pose, an override is not a model parameter, or the
+    parameters build no model.
     """
     overrides = dict(overrides or {})
     notes: list[str] = []
+    specs = model_specs()
+    foreign = sorted(name for name in overrides if name not in specs)
+    if foreign:
+        raise ResimError(f'not a model parameter: {", ".join(foreign)} (resim changes only the simulated model; '
+                         'see docs/parameters.md)')
     try:
         snapshots = recorded_parameters(log)
     except ValueError as err:
         raise ResimError(f'simulator/parameters unreadable: {err}') from err
-    specs = model_specs()
     if snapshots:
         first = snapshots[0]
         flat = {name: value for name, value in first.items() if name in specs}
@@ -260,11 +265,11 @@ def resimulate(log: LogReader, overrides: Mapping[str, Any] | None = None) -> Re
     step_periods = sorted({float(s['step_period']) for s in snapshots if 'step_period' in s}) or [1e-3]
     stops, exact = stop_times([(ns, m.message.pose.position.x, m.message.pose.position.z) for ns, m in poses],
                               step_periods)
-    if not exact:
-        notes.append('real-time run: the simulator stopped at sums of elapsed wall times x real_time_factor, '
-                     'which the stamps give rounded to 1 ns, so the re-simulation stops within 1 ns of them, not '
-                     'bit for bit; its integrator steps differ by that much, and a difference at the 1e-14 m level '
-                     '(4e-14 m measured over a 20-slip run) comes from this, not from the commands or the model')
+    real_time_note = None if exact else (
+        'real-time run: the simulator stopped at sums of elapsed wall times x real_time_factor, '
+        'which the stamps give rounded to 1 ns, so the re-simulation stops within 1 ns of them, not '
+        'bit for bit; its integrator steps differ by that much, and a difference at the 1e-14 m level '
+        '(4e-14 m measured over a 20-slip run) comes from this, not from the commands or the model')
     commands, receipts = _commands(log, pose_log, notes)
     if poses[0][0] != 0:
         notes.append(f'the first recorded pose is at t = {poses[0][0] * 1e-9:.6f} s, not 0 (the recorder joined '
@@ -273,20 +278,27 @@ def resimulate(log: LogReader, overrides: Mapping[str, Any] | None = None) -> Re
     stepper = Stepper(model)
     report = ResimReport(str(log.path), run_mode(first), source, overrides, 0, 0.0, 0.0, 0.0, 0.0, None, 0, 0,
                          exact, receipts, notes)
-    pending: Iterator[_Command] = iter(sorted(commands, key=lambda c: c.receipt_ns))  # stable: receipt order
+    _run(stepper, stops, sorted(commands, key=lambda c: c.receipt_ns), report)  # stable: receipt order
+    if real_time_note is not None and report.max_error != 0.0:  # explains a difference; none when there is none
+        notes.append(real_time_note)
+    return report
+
+
+def _run(stepper: Stepper, stops: list[_Stop], commands: list[_Command], report: ResimReport) -> None:
+    """Step through ``stops``, applying ``commands`` at their receipt times and comparing the poses."""
+    pending: Iterator[_Command] = iter(commands)
     next_cmd = next(pending, None)
     for stop in stops:
         while next_cmd is not None and next_cmd.receipt_ns < stop.ns:  # received between two known stops
             if not _advance(stepper, next_cmd.receipt_ns / 1e9, report):
-                return report
+                return
             next_cmd = _receive(stepper, next_cmd, pending, report)
         if not _advance(stepper, stop.t, report):
-            return report
+            return
         if stop.pose is not None:
             _compare(stepper, stop, report)
         while next_cmd is not None and next_cmd.receipt_ns == stop.ns:
             next_cmd = _receive(stepper, next_cmd, pending, report)
-    return report
 
 
 def _advance(stepper: Stepper, t: float, report: ResimReport) -> bool:
