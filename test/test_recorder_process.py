@@ -15,6 +15,7 @@ import pytest
 import rclpy
 from geometry_msgs.msg import PoseStamped
 from log_fixtures import pose
+from rclpy.duration import Duration
 from ros_helpers import remove_stale_fastdds_shm, wait_until
 
 from micro_feeder.logs.reader import LogReader, TruncatedLogWarning
@@ -50,14 +51,31 @@ def pose_publisher(ros_context):
     node.destroy_node()
 
 
+WARM_UP = -1   # index of the pose that connects publisher and recorder before the counted ones
+
+
+def connect(publisher) -> None:
+    """Publish the warm-up pose and wait until the recorder has acknowledged it: its reader is then matched,
+    so no counted pose is lost to discovery (a publisher-side subscription count of 1 was not enough: the
+    first 30-105 poses were sometimes missing)."""
+    wait_until(lambda: publisher.get_subscription_count() == 1, 20, what='recorder subscribed')
+    warm_up = pose(0)
+    warm_up.pose.position.x = WARM_UP * 1e-6
+    publisher.publish(warm_up)
+    assert publisher.wait_for_all_acked(Duration(seconds=20)), 'the recorder never acknowledged the warm-up pose'
+
+
 def recorded_indices(log: LogReader) -> list[int]:
-    return [round(m.message.pose.position.x * 1e6) for m in log.messages(['particle/pose'])]
+    """Indices of the counted poses in the log, after checking that the warm-up pose came first."""
+    indices = [round(m.message.pose.position.x * 1e6) for m in log.messages(['particle/pose'])]
+    assert indices[:1] == [WARM_UP], 'the warm-up pose must be the first one recorded'
+    return indices[1:]
 
 
 def test_sigkill_loses_at_most_flush_period(tmp_path, pose_publisher):
     proc = start_recorder(tmp_path / 'log')
     try:
-        wait_until(lambda: pose_publisher.get_subscription_count() == 1, 20, what='recorder subscribed')
+        connect(pose_publisher)
         times = publish_for(pose_publisher, 2.2)
         killed_at = time.monotonic()
         proc.send_signal(signal.SIGKILL)
@@ -79,7 +97,7 @@ def test_sigkill_loses_at_most_flush_period(tmp_path, pose_publisher):
 def test_sigterm_and_sigint_leave_a_complete_log(tmp_path, pose_publisher, sig):
     proc = start_recorder(tmp_path / 'log')
     try:
-        wait_until(lambda: pose_publisher.get_subscription_count() == 1, 20, what='recorder subscribed')
+        connect(pose_publisher)
         times = publish_for(pose_publisher, 1.0)
         time.sleep(0.2)  # let the last messages travel before the stop signal: loss would not be the recorder's
         proc.send_signal(sig)
