@@ -14,6 +14,20 @@ from . import CommandError
 N = TypeVar('N')
 
 
+def validate(flat: dict[str, Any], controller: bool = False) -> None:
+    """Check the settings the nodes will refuse (the model groups, and the feed controller's goal with
+    ``controller``) before a session starts, so that a refused value leaves no log directory behind.
+    Raises :class:`CommandError`. Cheap: no contact tables are built."""
+    from ..nodes.parameters import validate_model
+    from ..settings import build_group
+    try:
+        validate_model(flat)
+        if controller:
+            from ..control.feed_planner import FeedGoal
+            build_group(FeedGoal, flat)
+    except (ParameterError, ValueError) as err:
+        raise CommandError(str(err)) from err
+
 
 class RosSession:
     """What a command builds its nodes with; see :func:`ros_session`."""

@@ -14,7 +14,7 @@ from typing import Any
 
 from . import CommandError
 from ._common import add_model_options, settings_from_args
-from ._session import ros_session
+from ._session import ros_session, validate
 
 # With --record, the controller starts once the recorder subscribes to these (so the log holds every state).
 RECORDED_BEFORE_START = ('particle/pose', 'particle/twist', 'actuator/trajectory', 'simulator/command_receipts')
@@ -40,6 +40,7 @@ def run(args: argparse.Namespace) -> int:
     flat = settings_from_args(args)
     if not args.timeout > 0:
         raise CommandError('--timeout must be > 0')
+    validate(flat, controller=True)      # before the recorder creates the log
     with ros_session(args.record) as session:
         from ..nodes.feed_controller import FeedController
         from ..nodes.simulator import Simulator

@@ -14,7 +14,7 @@ from typing import Any, TextIO
 
 from . import CommandError
 from ._common import add_model_options, settings_from_args
-from ._session import ros_session
+from ._session import ros_session, validate
 
 STATUS_PERIOD = 0.2   # s (wall clock) between two status line updates
 
@@ -63,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
     flat = settings_from_args(args)
     if args.duration is not None and not args.duration > 0:
         raise CommandError('--duration must be > 0')
+    validate(flat)      # before the recorder creates the log
     with ros_session(args.record) as session:
         from ..nodes.actuator import Actuator
         from ..nodes.simulator import Simulator
