@@ -59,6 +59,11 @@ def test_controller_crash_leaves_the_simulator_running_and_the_log_complete(ros_
         msgs = probe.msgs
         wait_until(lambda: len(msgs['particle/pose']) > 10, 120, executor=executor, what='the simulator')
         controller = start_process('feed_controller', '-p', 'feed.target_x:=0.2e-3')   # ~100 strokes away
+        # the recorder subscribes to a topic when discovery (1 s period) sees its publisher: kill the controller
+        # only after that, and after a burst sent since, or the log may hold no trajectory at all
+        wait_until(lambda: any(info.node_name == 'recorder'
+                               for info in probe.get_subscriptions_info_by_topic('/actuator/trajectory')),
+                   60, executor=executor, what='the recorder to subscribe to the trajectories')
         x0 = msgs['particle/pose'][-1].pose.position.x
         wait_until(lambda: msgs['particle/pose'][-1].pose.position.x < x0 - 1e-6, 60, executor=executor,
                    what='the controller to move the part')
