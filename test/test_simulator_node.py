@@ -408,3 +408,24 @@ def test_stop_at_bounds_lockstep_grants(ros_context: Context) -> None:
         assert not ok and 'stopped' in message and rig.sim.stepper.t == 2.5 * STEP
     finally:
         rig.close()
+
+
+def test_joint_velocities_are_the_schedule_rate(stepped: Rig) -> None:
+    msg = hold_message(0.0015, [0.0, 0.0025, 0.006], [0.0, 10e-6, 0.0])     # ramps up then down, off the grid
+    stepped.send_trajectory(msg)
+    stepped.step(8)
+    schedule = stepped.sim.stepper.schedule
+    joints = stepped.probe.msgs['actuator/joint_states'][-8:]
+    rates = [schedule.evaluate(stamp_s(j))[1][0] for j in joints]
+    assert [j.velocity[0] for j in joints] == rates
+    assert any(r > 0.0 for r in rates) and any(r < 0.0 for r in rates)
+    obs = stepped.sim.stepper.observe()
+    assert obs.stroke_velocities.tolist() == schedule.evaluate(stepped.sim.stepper.t)[1].tolist()
+
+
+def test_observed_stroke_velocities_with_the_piezo_model() -> None:
+    stepper = Stepper(build_model({'piezo.enabled': True}))
+    stepper.command_setpoints(np.array([30e-6]))
+    stepper.advance(2e-5)
+    obs = stepper.observe()
+    assert obs.stroke_velocities.shape == (1,) and obs.stroke_velocities[0] == stepper.state.y[5] != 0.0

@@ -317,7 +317,7 @@ class Simulator(Node):
     def _publish_state(self, events: list[Event]) -> None:
         obs = self._stepper.observe()
         state = self._state_messages
-        stamp = state.update(obs, self._stepper.stroke_velocities())
+        stamp = state.update(obs, obs.stroke_velocities)
         self._pub_pose.publish(state.pose)
         self._pub_twist.publish(state.twist)
         self._pub_wrench.publish(state.wrench)

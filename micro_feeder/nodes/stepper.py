@@ -83,12 +83,6 @@ class Stepper:
     def observe(self) -> Observation:
         return self.model.observe(self.state, self.schedule)
 
-    def stroke_velocities(self) -> np.ndarray:
-        """ṡ per actuator (m/s): the piezo stack's state when the piezo model is on, else the command's."""
-        if self.model.piezo.enabled:     # state vector [x, ẋ, z, ż, s_0, ṡ_0, s_1, ṡ_1 ...] (kernel layout)
-            return self.state.y[5::2][:self.model.n_actuators].copy()
-        return self.schedule.evaluate(self.state.t)[1]
-
     def command_trajectory(self, cmd: TrajectoryCommand) -> float:
         """Apply a checked trajectory: it replaces the schedule from its start time on (the stamp, or now
         when the stamp is 0 or past); knots are at stamp + time_from_start (receipt time + time_from_start

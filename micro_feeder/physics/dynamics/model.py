@@ -68,7 +68,8 @@ class Observation:
     rotates by −θ about y, so that +x of the contact frame points up the slope when h_x > 0.
     ``normal_load`` is N (> 0 presses the part on the surface; in flight −F_att, the attraction);
     ``friction`` is T along the contact frame's x; ``separation`` is d(N) (NaN in flight); ``gap`` the
-    distance to the surface in flight (NaN in contact).
+    distance to the surface in flight (NaN in contact). ``strokes`` and ``stroke_velocities`` are s and ṡ per
+    actuator (m, m/s): the piezo stack's state with the piezo model on, else the commanded stroke's.
     """
 
     t: float
@@ -86,6 +87,7 @@ class Observation:
     surface_height: float
     surface_velocity: float
     strokes: np.ndarray
+    stroke_velocities: np.ndarray
 
 
 class FeederState:
@@ -288,7 +290,7 @@ class FeederModel:
         event, plus (with ``output_step``, s) rows at least every ``output_step`` for smooth plots."""
         state = self.initial_state() if state is None else state
         t_end = state.t + (self.default_duration() if duration is None else duration)
-        rows = [self._observe_row(state, source)]
+        rows = [self._observe_row(state, source)[0]]
         events: list[Event] = []
         stops = [t_end] if output_step is None else \
             [*np.arange(state.t + output_step, t_end, output_step).tolist(), t_end]
@@ -304,10 +306,11 @@ class FeederModel:
 
     def observe(self, state: FeederState, source: StrokeTable | StrokeSchedule | None = None) -> Observation:
         """The outputs of DYNAMICS.md §6 at ``state.t`` (does not change the state)."""
-        row = self._observe_row(state, source)
+        row, st = self._observe_row(state, source)
         values = dict(zip(k.COLUMN_NAMES, row[0, :k.N_FIXED_COLUMNS].tolist(), strict=True))
         values['mode'] = MODES[int(values['mode'])]
-        return Observation(**values, strokes=row[0, k.N_FIXED_COLUMNS:].copy())
+        return Observation(**values, strokes=row[0, k.N_FIXED_COLUMNS:].copy(),
+                           stroke_velocities=st[1, :self.n_actuators].copy())
 
     # ------------------------------------------------------------------------------------------------
 
@@ -333,16 +336,20 @@ class FeederModel:
                 out.append((min(t_until, t1), self._source_table(table).as_tuple()))
         return out
 
-    def _observe_row(self, state: FeederState, source: StrokeTable | StrokeSchedule | None) -> np.ndarray:
+    def _observe_row(self, state: FeederState, source: StrokeTable | StrokeSchedule | None
+                     ) -> tuple[np.ndarray, np.ndarray]:
+        """The output row (1, columns) at ``state.t`` and the strokes' s, ṡ, s̈ per channel (3, channels)
+        the kernel evaluated for it."""
         table = source.table_at(state.t) if isinstance(source, StrokeSchedule) else source
         src = self._source_table(table).as_tuple()
         n_ch = src[0].size
         cur = np.zeros((n_ch, 2), dtype=np.int64)
         k.locate_all(src, state.t, cur)
         row = np.zeros((1, k.N_FIXED_COLUMNS + self.n_actuators))
-        k.observe(state.t, state.y, state.iv, self._packed, src, cur, np.zeros((3, n_ch)),
+        st = np.zeros((3, n_ch))
+        k.observe(state.t, state.y, state.iv, self._packed, src, cur, st,
                   np.zeros(k.N_AUX), np.zeros(state.y.size), row[0])
-        return row
+        return row, st
 
     def _integrate(self, state: FeederState, t_target: float,
                    source: StrokeTable | StrokeSchedule | None, record: bool
