@@ -429,3 +429,27 @@ def test_observed_stroke_velocities_with_the_piezo_model() -> None:
     stepper.advance(2e-5)
     obs = stepper.observe()
     assert obs.stroke_velocities.shape == (1,) and obs.stroke_velocities[0] == stepper.state.y[5] != 0.0
+
+
+def test_reset_builds_the_model_without_holding_the_lock(stepped: Rig, monkeypatch) -> None:
+    import threading
+
+    import micro_feeder.nodes.simulator as simulator_module
+    free: list[bool] = []
+
+    def try_lock() -> None:      # from another thread, as the loop thread would
+        acquired = stepped.sim._lock.acquire(blocking=False)
+        if acquired:
+            stepped.sim._lock.release()
+        free.append(acquired)
+
+    def build(flat):
+        other = threading.Thread(target=try_lock)
+        other.start()
+        other.join()
+        return build_model(flat)
+
+    monkeypatch.setattr(simulator_module, 'build_model', build)
+    stepped.step(2)
+    assert stepped.probe.call(stepped.executor, Trigger, 'simulator/reset').success
+    assert free == [True] and stepped.sim.stepper.t == 0.0

@@ -384,22 +384,25 @@ class Simulator(Node):
 
     # -- services -----------------------------------------------------------------------------------
 
-    @locked
     def _on_reset(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        # The model is built without the lock (new contact tables take ~1 s; the loop keeps ticking
+        # meanwhile) and swapped in under it.
+        parameters = self._parameter_msgs(self._model_specs)
         try:
             model = build_model(values(self, self._model_specs))
         except (ParameterError, ValueError) as err:
             response.success, response.message = False, f'model parameters refused, not reset: {err}'
             return response
-        self._stepper.reset(model)
-        self._model_parameters = self._parameter_msgs(self._model_specs)
-        self._model_pending = False
-        self.error = ''
-        self._mode = ''
-        self._configure_outputs()
-        self._window = (time.perf_counter(), 0.0)
-        self._publish_parameters()
-        self._publish_state([])
+        with self._lock:
+            self._stepper.reset(model)
+            self._model_parameters = parameters
+            self._model_pending = False
+            self.error = ''
+            self._mode = ''
+            self._configure_outputs()
+            self._window = (time.perf_counter(), 0.0)
+            self._publish_parameters()
+            self._publish_state([])
         response.success, response.message = True, 't = 0, model parameters applied'
         return response
 
