@@ -68,7 +68,13 @@ def run(args: argparse.Namespace) -> int:
 
 
 def outcome(sim: Any, controller: Any, wall_s: float, log: str | None) -> dict[str, Any]:
-    """The JSON object of ``micro-feeder hil --json``."""
+    """The JSON object of ``micro-feeder hil --json``.
+
+    ``final_error_m``, ``final_mode`` and ``sim_time_s`` are the simulator's final state, read after
+    :func:`run` paused it (so the three agree with each other); they can differ from the last pose the
+    controller saw, which its ``status_text()`` reports. ``reached``, ``strokes``, ``bursts``,
+    ``time_to_target_s``, ``status`` and ``reason`` are the controller's.
+    """
     state = sim.stepper.state
     result = controller.result()
     return {'reached': result['reached'], 'time_to_target_s': result['time_to_target_s'],
