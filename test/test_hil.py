@@ -59,14 +59,16 @@ def test_controller_crash_leaves_the_simulator_running_and_the_log_complete(ros_
         msgs = probe.msgs
         wait_until(lambda: len(msgs['particle/pose']) > 10, 120, executor=executor, what='the simulator')
         controller = start_process('feed_controller', '-p', 'feed.target_x:=0.2e-3')   # ~100 strokes away
-        # the recorder subscribes to a topic when discovery (1 s period) sees its publisher: kill the controller
-        # only after that, and after a burst sent since, or the log may hold no trajectory at all
-        wait_until(lambda: any(info.node_name == 'recorder'
-                               for info in probe.get_subscriptions_info_by_topic('/actuator/trajectory')),
-                   60, executor=executor, what='the recorder to subscribe to the trajectories')
+        # kill the controller once the recorder reports a burst recorded (its first bursts can go out before
+        # the new process and the recorder have matched), and once the part moved
+        def recorded_bursts() -> int:
+            return max((int(kv.value) for d in msgs['/diagnostics'] for st in d.status
+                        if st.name.startswith('recorder') for kv in st.values
+                        if kv.key == 'received./actuator/trajectory'), default=0)
+
         x0 = msgs['particle/pose'][-1].pose.position.x
-        wait_until(lambda: msgs['particle/pose'][-1].pose.position.x < x0 - 1e-6, 60, executor=executor,
-                   what='the controller to move the part')
+        wait_until(lambda: recorded_bursts() >= 1 and msgs['particle/pose'][-1].pose.position.x < x0 - 1e-6, 60,
+                   executor=executor, what='a burst recorded and the part moved by the controller')
         controller.send_signal(signal.SIGKILL)
         controller.wait(10)
         killed_at = stamp_s(msgs['particle/pose'][-1])
