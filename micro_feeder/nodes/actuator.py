@@ -101,8 +101,7 @@ class Actuator(Node):
         msg = self.trajectory()
         self._pub.publish(msg)
         self.bursts += 1
-        end = msg.points[-1].time_from_start
-        length = end.sec + end.nanosec * 1e-9
+        length = messages.seconds(msg.points[-1].time_from_start)
         return f'burst sent: {len(msg.points)} knots on {len(msg.joint_names)} joints, {length:.6g} s'
 
     def stop(self) -> str:

@@ -13,6 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 from trajectory_msgs.msg import JointTrajectory
 
+from .messages import seconds
+
 
 class CommandRejected(ValueError):
     """An actuator command that is not applied; the message says why."""
@@ -61,7 +63,7 @@ def parse_trajectory(msg: JointTrajectory, joints: Sequence[str], limits: tuple[
     every array one value per joint; all values finite; positions within the piezo limits; the header
     stamp not negative.
     """
-    stamp = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
+    stamp = seconds(msg.header.stamp)
     if stamp < 0:
         raise CommandRejected(f'trajectory: negative header.stamp {stamp:g} s')
     points = msg.points
@@ -77,7 +79,7 @@ def parse_trajectory(msg: JointTrajectory, joints: Sequence[str], limits: tuple[
     if missing:
         raise CommandRejected(f'trajectory: joints {missing} missing (every joint must be commanded)')
     order = [names.index(n) for n in joints]
-    offsets = np.array([p.time_from_start.sec + p.time_from_start.nanosec * 1e-9 for p in points])
+    offsets = np.array([seconds(p.time_from_start) for p in points])
     if offsets[0] < 0 or np.any(np.diff(offsets) <= 0):
         raise CommandRejected(f'trajectory: time_from_start must be >= 0 and strictly increasing, got '
                               f'{offsets.tolist()}')

@@ -60,10 +60,6 @@ START_POLL_PERIOD = 0.05   # s (wall clock): how often a lockstep controller loo
 STATUS_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 
 
-def stamp_s(stamp: Time) -> float:
-    return stamp.sec + stamp.nanosec * 1e-9
-
-
 class FeedController(Node):
     """Feed-to-target controller: see the module docstring and docs/hil.md."""
 
@@ -130,7 +126,7 @@ class FeedController(Node):
             del self._poses[old]
         for old in [k for k in self._twists if k < key]:
             del self._twists[old]
-        self._decide(stamp_s(pose.header.stamp), pose.pose.position.x, twist)
+        self._decide(messages.seconds(pose.header.stamp), pose.pose.position.x, twist)
 
     # -- control -------------------------------------------------------------------------------------
 

@@ -37,6 +37,11 @@ def to_duration(t: float) -> Duration:
     return Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
+def seconds(t: Time | Duration) -> float:
+    """A ROS Time or Duration in seconds (the inverse of :func:`to_time` / :func:`to_duration`)."""
+    return t.sec + t.nanosec * 1e-9
+
+
 def tilt_quaternion(theta: float) -> tuple[float, float, float, float]:
     """(x, y, z, w) of the contact frame's orientation in ``feeder``: a rotation by −θ about y, so that the
     contact x axis (cos θ, 0, sin θ) points up the slope when h_x = tan θ > 0."""
