@@ -33,7 +33,7 @@ from geometry_msgs.msg import PoseStamped
 from rclpy.executors import SingleThreadedExecutor
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from micro_feeder.nodes.simulator import topic_qos
+from micro_feeder.nodes._ros import topic_qos
 
 CLK_TCK = os.sysconf('SC_CLK_TCK')
 

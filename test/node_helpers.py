@@ -21,7 +21,7 @@ from trajectory_msgs.msg import JointTrajectory
 
 from micro_feeder.logs.topics import TOPICS
 from micro_feeder.nodes._ros import message_class
-from micro_feeder.nodes.simulator import topic_qos
+from micro_feeder.nodes._ros import topic_qos
 
 
 def _deep(topic: str) -> QoSProfile:

@@ -19,6 +19,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rclpy.task import Future
 
 from ..logs.metadata import qos_profile
+from ..logs.topics import TOPICS_BY_NAME
 
 SPIN_SLICE = 0.1  # s: longest delay between a signal and the spin loop noticing it
 
@@ -77,3 +78,12 @@ def spin_until(executor: Executor, done: Callable[[], bool], future: Future | No
     future = future or Future()
     while not done():
         executor.spin_until_future_complete(future, timeout_sec=SPIN_SLICE)
+
+
+def topic_qos(name: str, min_depth: int = 0) -> QoSProfile:
+    """The QoS of a topic of DESIGN.md §3 (relative name, e.g. ``particle/pose``) from the shared table
+    (logs/topics.py), with a history at least ``min_depth`` deep."""
+    spec = TOPICS_BY_NAME[name]
+    reliability = ReliabilityPolicy.RELIABLE if spec.reliable else ReliabilityPolicy.BEST_EFFORT
+    durability = DurabilityPolicy.TRANSIENT_LOCAL if spec.transient_local else DurabilityPolicy.VOLATILE
+    return QoSProfile(depth=max(spec.depth, min_depth), reliability=reliability, durability=durability)

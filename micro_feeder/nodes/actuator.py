@@ -26,9 +26,9 @@ from trajectory_msgs.msg import JointTrajectory
 from ..physics.parameters import ParamSpec
 from ..physics.waveforms import StrokeParams, waveform_table
 from . import messages
+from ._ros import topic_qos
 from .commands import joint_names
 from .parameters import check_changes, declare, model_specs, values
-from .simulator import topic_qos
 from .spin import spin_node
 
 NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {

@@ -37,10 +37,10 @@ from ..control.feed_planner import Burst, FeedGoal, FeedPlanner
 from ..physics.parameters import ParamSpec
 from ..physics.waveforms import StrokeParams
 from . import messages
+from ._ros import topic_qos
 from .actuator import sample_waveform
 from .commands import joint_names
 from .parameters import declare, model_specs, values
-from .simulator import topic_qos
 from .spin import spin_node
 
 NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {

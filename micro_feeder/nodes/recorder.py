@@ -42,7 +42,7 @@ from ..logs.reader import LogReader
 from ..logs.summary import format_summary, summarize
 from ..logs.topics import TOPICS, TOPICS_BY_NAME
 from ..logs.writer import LogWriter
-from ._ros import StopFlag, message_class, qos_to_dict, spin_until
+from ._ros import StopFlag, message_class, qos_to_dict, spin_until, topic_qos
 
 SUBSCRIPTION_DEPTH = 1000  # messages queued per topic while the writer is busy
 DIAGNOSTICS_PERIOD = 1.0  # s
@@ -98,11 +98,7 @@ class Recorder(Node):
             if spec is None:
                 self._pending[absolute] = name
             else:
-                self._subscribe(absolute, spec.type, QoSProfile(
-                    depth=max(spec.depth, SUBSCRIPTION_DEPTH),
-                    reliability=ReliabilityPolicy.RELIABLE if spec.reliable else ReliabilityPolicy.BEST_EFFORT,
-                    durability=(DurabilityPolicy.TRANSIENT_LOCAL if spec.transient_local
-                                else DurabilityPolicy.VOLATILE)))
+                self._subscribe(absolute, spec.type, topic_qos(name, SUBSCRIPTION_DEPTH))
         self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_timer(DIAGNOSTICS_PERIOD, self._publish_diagnostics)
         self.create_timer(min(p['flush_period'] / 2, 0.25), self._flush_if_due)

@@ -43,7 +43,6 @@ from rcl_interfaces.msg import ParameterEvent, SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
@@ -52,10 +51,10 @@ from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
-from ..logs.topics import TOPICS_BY_NAME
 from ..physics.dynamics import Event, SimulationError
 from ..physics.parameters import ParameterError, ParamSpec
 from . import messages
+from ._ros import topic_qos
 from .commands import CommandRejected, joint_names, parse_setpoints, parse_trajectory
 from .parameters import check_changes, declare, model_specs, values
 from .spin import spin_node
@@ -87,14 +86,6 @@ def locked(method: F) -> F:
         with self._lock:
             return method(self, *args, **kwargs)
     return wrapper  # type: ignore[return-value]
-
-
-def topic_qos(name: str) -> QoSProfile:
-    """The QoS of a topic of DESIGN.md §3, from the table the recorder shares (logs/topics.py)."""
-    spec = TOPICS_BY_NAME[name]
-    reliability = ReliabilityPolicy.RELIABLE if spec.reliable else ReliabilityPolicy.BEST_EFFORT
-    durability = DurabilityPolicy.TRANSIENT_LOCAL if spec.transient_local else DurabilityPolicy.VOLATILE
-    return QoSProfile(depth=spec.depth, reliability=reliability, durability=durability)
 
 
 PART_SIZE = 100e-6     # marker diameter of the part (m)
