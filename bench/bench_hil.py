@@ -101,8 +101,7 @@ def run_responder(executor_kind: str) -> int:
     from std_msgs.msg import Header
     from trajectory_msgs.msg import JointTrajectory
 
-    from micro_feeder.nodes._ros import StopFlag, spin_until
-    from micro_feeder.nodes._ros import topic_qos
+    from micro_feeder.nodes._ros import StopFlag, spin_until, topic_qos
 
     rclpy.init(signal_handler_options=SignalHandlerOptions.NO)
     stop = StopFlag().install()

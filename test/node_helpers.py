@@ -20,8 +20,7 @@ from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from micro_feeder.logs.topics import TOPICS
-from micro_feeder.nodes._ros import message_class
-from micro_feeder.nodes._ros import topic_qos
+from micro_feeder.nodes._ros import message_class, topic_qos
 
 
 def _deep(topic: str) -> QoSProfile:
