@@ -27,9 +27,11 @@ setup(
         'mcap>=1.2',
         'mcap-ros2-support>=0.5',
         'zstandard>=0.22',
+        'foxglove-sdk>=0.30',
     ],
     extras_require={
-        'test': ['pytest', 'pytest-timeout', 'rosbags', 'ruff'],
+        'dask': ['dask[distributed]>=2025.1'],
+        'test': ['pytest', 'pytest-timeout', 'rosbags', 'ruff', 'hypothesis', 'dask[distributed]>=2025.1'],
     },
     zip_safe=True,
     maintainer='micro_feeder team',
