@@ -9,7 +9,7 @@ OUT ?= out
 # All ROS traffic stays on this host unless the caller says otherwise.
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 
-.PHONY: test demo lint bench install constraints clean
+.PHONY: test demo lint bench install constraints clean foxglove-client figures
 
 install: $(STAMP)
 
@@ -22,8 +22,16 @@ $(STAMP): requirements.txt constraints.txt setup.py package.xml
 lint: $(STAMP)
 	$(BIN)/ruff check .
 
-test: lint
+test: lint foxglove-client
 	$(BIN)/python -m pytest test
+
+# The real Foxglove WebSocket client the live-view tests use (npm, pinned by package-lock.json; node >= 18).
+FOXGLOVE_CLIENT := test/foxglove_client
+foxglove-client: $(FOXGLOVE_CLIENT)/node_modules/.installed
+
+$(FOXGLOVE_CLIENT)/node_modules/.installed: $(FOXGLOVE_CLIENT)/package.json $(FOXGLOVE_CLIENT)/package-lock.json
+	cd $(FOXGLOVE_CLIENT) && npm ci --ignore-scripts --no-audit --no-fund
+	touch $@
 
 # The whole pipeline: contact model, an offline stroke and a frequency sweep, the ROS nodes recording a
 # run, a look at the log, its re-simulation, and the feed controller in the loop.
@@ -48,4 +56,4 @@ constraints:
 	/tmp/mf-constraints-venv/bin/pip freeze --exclude-editable | $(PYTHON) tools/pin_constraints.py > constraints.txt
 
 clean:
-	rm -rf $(VENV) $(OUT) build *.egg-info
+	rm -rf $(VENV) $(OUT) build *.egg-info $(FOXGLOVE_CLIENT)/node_modules

@@ -32,9 +32,10 @@ def validate(flat: dict[str, Any], controller: bool = False) -> None:
 class RosSession:
     """What a command builds its nodes with; see :func:`ros_session`."""
 
-    def __init__(self, context: Any, stop: Any, record: str | None):
+    def __init__(self, context: Any, stop: Any, record: str | None, viewer: Any = None):
         self.context = context
         self.stop = stop
+        self.viewer = viewer    # a micro_feeder.viz Viewer (--foxglove): forwards what the nodes publish
         self.nodes: list[Any] = []
         self.recorder = None
         self.log: str | None = None
@@ -52,6 +53,8 @@ class RosSession:
         except (ParameterError, ValueError, FileExistsError) as err:
             raise CommandError(str(err)) from err
         self.nodes.append(node)
+        if self.viewer is not None:
+            self.viewer.tap(node)
         return node
 
     def spin(self, done: Callable[[], bool], future: Any = None) -> None:
@@ -77,8 +80,9 @@ class RosSession:
 
 
 @contextlib.contextmanager
-def ros_session(record: str | None = None) -> Iterator[RosSession]:
-    """A :class:`RosSession`; ROS traffic stays on this host unless ROS_AUTOMATIC_DISCOVERY_RANGE is set."""
+def ros_session(record: str | None = None, viewer: Any = None) -> Iterator[RosSession]:
+    """A :class:`RosSession`; ROS traffic stays on this host unless ROS_AUTOMATIC_DISCOVERY_RANGE is set.
+    ``viewer`` (``cli._foxglove.live_view``) is given every node built."""
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     import rclpy  # after the environment is set: rcl reads it at init
     from rclpy.context import Context
@@ -90,7 +94,7 @@ def ros_session(record: str | None = None) -> Iterator[RosSession]:
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     session = None
     try:
-        session = RosSession(context, StopFlag().install(), record)
+        session = RosSession(context, StopFlag().install(), record, viewer)
         yield session
     finally:
         if session is not None:

@@ -14,6 +14,7 @@ from typing import Any
 
 from . import CommandError
 from ._common import add_model_options, settings_from_args
+from ._foxglove import add_foxglove_option, live_view
 from ._session import ros_session, validate
 
 # With --record, the controller starts once the recorder subscribes to these (so the log holds every state).
@@ -33,6 +34,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help='give up after this much sim time (default 2 s)')
     parser.add_argument('--record', metavar='PATH', help='record every topic to this log (docs/logs.md)')
     parser.add_argument('--json', action='store_true', help='print one JSON object and nothing else')
+    add_foxglove_option(parser)
     parser.set_defaults(func=run)
 
 
@@ -41,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
     if not args.timeout > 0:
         raise CommandError('--timeout must be > 0')
     validate(flat, controller=True)      # before the recorder creates the log
-    with ros_session(args.record) as session:
+    with live_view(args.foxglove) as viewer, ros_session(args.record, viewer) as session:
         from ..nodes.feed_controller import FeedController
         from ..nodes.simulator import Simulator
 

@@ -7,6 +7,7 @@ import math
 import os
 
 from . import CommandError
+from ._foxglove import add_foxglove_option, live_view
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -21,6 +22,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help='replay only this topic (repeatable)')
     parser.add_argument('--remap', action='append', default=[], metavar='FROM:=TO', help='rename a topic')
     parser.add_argument('--clock', action='store_true', help='publish the playback time on /clock')
+    add_foxglove_option(parser)
     parser.set_defaults(func=run)
 
 
@@ -45,7 +47,9 @@ def run(args: argparse.Namespace) -> int:
     def strings(values: list[str]) -> str:
         return '[' + ','.join(f'"{v}"' for v in values) + ']' if values else '[""]'
 
-    return replay_main(['replay', '--ros-args', '-p', f'log:={args.log}', '-p', f'rate:={args.rate}',
-                        '-p', f'loop:={str(args.loop).lower()}', '-p', f'start_offset:={args.start_offset}',
-                        '-p', f'topics:={strings(args.topics)}', '-p', f'remap:={strings(args.remap)}',
-                        '-p', f'publish_clock:={str(args.clock).lower()}'])
+    with live_view(args.foxglove) as viewer:
+        return replay_main(['replay', '--ros-args', '-p', f'log:={args.log}', '-p', f'rate:={args.rate}',
+                            '-p', f'loop:={str(args.loop).lower()}', '-p', f'start_offset:={args.start_offset}',
+                            '-p', f'topics:={strings(args.topics)}', '-p', f'remap:={strings(args.remap)}',
+                            '-p', f'publish_clock:={str(args.clock).lower()}'],
+                           tap=viewer.tap if viewer is not None else None)

@@ -14,6 +14,7 @@ from typing import Any, TextIO
 
 from . import CommandError
 from ._common import add_model_options, settings_from_args
+from ._foxglove import add_foxglove_option, live_view
 from ._session import ros_session, validate
 
 STATUS_PERIOD = 0.2   # s (wall clock) between two status line updates
@@ -32,6 +33,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help='sim seconds per wall second, 0 = as fast as possible (default 1)')
     parser.add_argument('--record', metavar='PATH',
                         help='record every topic to this log (rosbag2 directory with MCAP, see docs/logs.md)')
+    add_foxglove_option(parser)
     parser.set_defaults(func=run)
 
 
@@ -64,7 +66,7 @@ def run(args: argparse.Namespace) -> int:
     if args.duration is not None and not args.duration > 0:
         raise CommandError('--duration must be > 0')
     validate(flat)      # before the recorder creates the log
-    with ros_session(args.record) as session:
+    with live_view(args.foxglove) as viewer, ros_session(args.record, viewer) as session:
         from ..nodes.actuator import Actuator
         from ..nodes.simulator import Simulator
 

@@ -15,6 +15,7 @@ import sys
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 
 import numpy as np
 import rclpy
@@ -198,8 +199,9 @@ class Replay(Node):
             self._thread.join()
 
 
-def main(args: list[str] | None = None) -> int:
-    """Console script ``replay``: ``replay --ros-args -p log:=out/run1 -p rate:=2.0``."""
+def main(args: list[str] | None = None, tap: Callable[[Node], None] | None = None) -> int:
+    """Console script ``replay``: ``replay --ros-args -p log:=out/run1 -p rate:=2.0``. ``tap`` is given the
+    node before it plays (``micro-feeder replay --foxglove``)."""
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = StopFlag().install()
     try:
@@ -208,6 +210,8 @@ def main(args: list[str] | None = None) -> int:
         print(f'replay: error: {err}', file=sys.stderr)
         rclpy.shutdown()
         return 2
+    if tap is not None:
+        tap(node)
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     node.start()
