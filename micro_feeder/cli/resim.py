@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from typing import Any
 
 from ..settings import parse_override
 from . import CommandError
@@ -24,8 +25,37 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_model_options(parser)
     parser.add_argument('--json', action='store_true', help='print the report as JSON')
     parser.add_argument('--tolerance', type=float, metavar='M',
-                        help='exit with status 1 when the largest difference exceeds M metres')
+                        help='exit with status 1 when the largest difference exceeds M metres; the verdict says '
+                             '"MATCHES within" a difference up to M (default M for the verdict: the run\'s '
+                             'integration.tolerance, the position error its integrator allows per step)')
     parser.set_defaults(func=run)
+
+
+def _tolerance(given: float | None, log: Any, overrides: dict[str, Any]) -> tuple[float, str]:
+    """The difference (m) below which the verdict says the runs match, and where it comes from: ``--tolerance``,
+    else the run's ``integration.tolerance``. Why that one: the integrator is allowed that position error per
+    step, and a real-time log knows its stop times to 1 ns only, so the re-simulation takes other steps than
+    the simulator did; differences below the error each step may make are numerical noise, not physics."""
+    if given is not None:
+        return given, '--tolerance'
+    from ..logs.sim_parameters import recorded_parameters
+    from ..physics.dynamics.params import IntegrationParams
+    recorded = recorded_parameters(log)
+    name = 'integration.tolerance'
+    value = overrides.get(name, recorded[0].get(name) if recorded else None)
+    if value is None:
+        value = IntegrationParams().tolerance
+    return float(value), f'{name}: the position error the integrator allows per step'
+
+
+def verdict(report: Any, tolerance: float, source: str) -> str:
+    """The report's verdict, with "MATCHES within X (tolerance Y ...)" for a difference within the tolerance
+    (the exact figures kept)."""
+    line = report.verdict()
+    if report.identical or not report.max_error <= tolerance:
+        return line
+    detail = line.split(': ', 2)[2]     # after 'resim: DIFFERENT: '
+    return f'resim: MATCHES within {report.max_error:.2g} m (tolerance {tolerance:g} m, {source}): {detail}'
 
 
 def run(args: argparse.Namespace) -> int:
@@ -46,10 +76,12 @@ def run(args: argparse.Namespace) -> int:
         report = resimulate(log, overrides)
     except ResimError as err:
         raise CommandError(str(err)) from err
+    tolerance, source = _tolerance(args.tolerance, log, overrides)
     if args.json:
-        print(json.dumps(report.as_dict(), indent=2))
+        print(json.dumps({**report.as_dict(), 'tolerance': tolerance, 'tolerance_source': source,
+                          'matches': report.max_error <= tolerance}, indent=2))
     else:
-        print(report.verdict())
+        print(verdict(report, tolerance, source))
         for note in report.notes:
             print(f'  note: {note}')
     if args.tolerance is not None and not report.max_error <= args.tolerance:

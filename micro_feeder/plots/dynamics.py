@@ -1,4 +1,5 @@
-"""The particle dynamics in the form of the seed's Fig. 11 (one stroke's history) and Fig. 12 (sweep)."""
+"""Figures of offline runs: one run's history (strokes, velocity, friction, displacement, height, mode) and
+the sweep; the panel helpers are shared with the log plot (logs/plot.py)."""
 
 from __future__ import annotations
 
@@ -12,6 +13,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from ..physics.dynamics import MODES, RunResult
+from .units import scale
 
 MS, UM, MM = 1e3, 1e6, 1e3
 
@@ -25,39 +27,90 @@ def save(fig: plt.Figure, path: Path | str) -> Path:
     return path
 
 
+def actuator_colors(n: int) -> list:
+    """One colour per actuator (the same in every figure): tab10, or viridis beyond ten."""
+    cmap = plt.get_cmap('tab10' if n <= 10 else 'viridis')
+    return [cmap(k if n <= 10 else k / max(n - 1, 1)) for k in range(n)]
+
+
+def plot_strokes(ax: plt.Axes, t: np.ndarray, strokes: np.ndarray, t_label: str = '') -> None:
+    """Actuator strokes (n, k) against ``t`` on ``ax`` in a unit that suits them, one legend entry per
+    actuator (``piezo_k``)."""
+    factor, unit = scale(strokes, 'm')
+    strokes = np.atleast_2d(strokes.T).T
+    for k, color in enumerate(actuator_colors(strokes.shape[1])):
+        ax.plot(t, strokes[:, k] * factor, color=color, lw=1.2, label=f'piezo_{k}')
+    ax.set_ylabel(f'stroke ({unit})' + t_label)
+    ax.legend(loc='upper right', fontsize=8, ncol=min(strokes.shape[1], 5))
+
+
+def plot_friction(ax: plt.Axes, t: np.ndarray, friction: np.ndarray, q_max: np.ndarray,
+                  style: str = '-') -> None:
+    """Friction T against the static limit ±Q_max(N), on a panel of its own, in a unit that suits T."""
+    factor, unit = scale([friction, q_max], 'N')
+    ax.plot(t, friction * factor, style, color='C3', lw=1.2, ms=2.5, label='friction T')
+    ax.plot(t, q_max * factor, color='0.35', lw=0.9, ls='--', label='±Q_max(N), the static limit')
+    ax.plot(t, -q_max * factor, color='0.35', lw=0.9, ls='--')
+    ax.axhline(0.0, color='k', lw=0.5)
+    ax.set_ylabel(f'friction ({unit})')
+    ax.legend(loc='upper right', fontsize=8)
+
+
+def plot_modes(ax: plt.Axes, t: np.ndarray, mode: np.ndarray, t_end: float | None = None) -> None:
+    """The contact mode as a step line (stuck / sliding / flying)."""
+    if t_end is not None and len(t):
+        t, mode = np.append(t, t_end), np.append(mode, mode[-1])
+    ax.step(t, mode, where='post', color='k', lw=1.2)
+    ax.set(yticks=range(len(MODES)), yticklabels=MODES, ylim=(-0.5, len(MODES) - 0.5), ylabel='mode')
+
+
+def time_scale(t: np.ndarray) -> tuple[float, str]:
+    """Factor and unit (ms below 1 s of span, s above) for a time axis."""
+    span = float(np.ptp(t)) if len(t) else 0.0
+    return (MS, 'ms') if 0.0 < span < 1.0 else (1.0, 's')
+
+
 def plot_history(result: RunResult, path: Path | str, title: str = '') -> Path:
-    """Four stacked panels vs time: velocity along x, friction force (with ±Q_max), displacement, mode;
-    the actuator stroke is drawn faintly behind the velocity."""
-    t = result['t'] * MS
-    fig, axes = plt.subplots(4, 1, figsize=(9, 9), sharex=True,
-                             gridspec_kw={'height_ratios': [3, 3, 3, 1.3]})
-    ax_v, ax_f, ax_x, ax_mode = axes
-    ax_v.plot(t, result['xdot'] * MM, color='C0', label='particle velocity ẋ (v_x in flight)')
-    ax_v.set(ylabel='velocity (mm/s)', title=title or "Particle velocity and friction during the stroke "
-                                                      "(seed Fig. 11)")
-    ax_v.axhline(0.0, color='k', lw=0.5)
-    strokes = [c for c in result.columns if c.startswith('stroke_')]
-    ax_s = ax_v.twinx()
-    for name in strokes:
-        ax_s.plot(t, result[name] * UM, lw=0.8, ls=':', color='0.5')
-    ax_s.set_ylabel('stroke (um, dotted)', color='0.4')
-    ax_v.legend(loc='upper left', fontsize=8)
+    """Stacked panels against time: the actuator strokes (legend per actuator), the part's velocity along
+    the feeder, friction against ±Q_max, its displacement, its height above the surface when it flies, and the mode;
+    each in a unit that suits its values."""
+    factor_t, unit_t = time_scale(result['t'])
+    t = result['t'] * factor_t
+    flying = result['mode'] == MODES.index('flying')
+    panels = ['strokes', 'velocity', 'friction', 'x'] + (['height'] if flying.any() else []) + ['mode']
+    ratios = {'strokes': 2.2, 'velocity': 2.6, 'friction': 2.6, 'x': 2.4, 'height': 2.2, 'mode': 1.2}
+    fig, axes = plt.subplots(len(panels), 1, figsize=(9, 1.9 * len(panels) + 1), sharex=True,
+                             gridspec_kw={'height_ratios': [ratios[p] for p in panels]})
+    ax = dict(zip(panels, axes, strict=True))
+    strokes = np.column_stack([result[c] for c in result.columns if c.startswith('stroke_')])
+    plot_strokes(ax['strokes'], t, strokes)
 
-    ax_f.plot(t, result['friction'], color='C3', label='friction T')
-    ax_f.plot(t, result['q_max'], color='C3', lw=0.7, ls='--', label='±Q_max(N)')
-    ax_f.plot(t, -result['q_max'], color='C3', lw=0.7, ls='--')
-    ax_f.axhline(0.0, color='k', lw=0.5)
-    ax_f.set(ylabel='force (N)')
-    ax_f.legend(loc='upper left', fontsize=8)
+    factor_v, unit_v = scale(result['xdot'], 'm/s')
+    ax['velocity'].plot(t, result['xdot'] * factor_v, color='C0', lw=1.2, label='ẋ, along the feeder')
+    ax['velocity'].axhline(0.0, color='k', lw=0.5)
+    ax['velocity'].set_ylabel(f'velocity ({unit_v})')
+    ax['velocity'].legend(loc='upper right', fontsize=8)
 
-    ax_x.plot(t, (result['x'] - result['x'][0]) * UM, color='C2')
-    ax_x.set(ylabel='x − x0 (um)')
+    q_max = np.where(flying, np.nan, result['q_max'])
+    plot_friction(ax['friction'], t, np.where(flying, np.nan, result['friction']), q_max)
 
-    ax_mode.step(t, result['mode'], where='post', color='k')
-    ax_mode.set(yticks=range(len(MODES)), yticklabels=MODES, ylim=(-0.5, len(MODES) - 0.5),
-                xlabel='time (ms)')
-    for ax in axes:
-        ax.grid(alpha=0.3)
+    dx = result['x'] - result['x'][0]
+    factor_x, unit_x = scale(dx, 'm')
+    ax['x'].plot(t, dx * factor_x, color='C2', lw=1.4)
+    ax['x'].set_ylabel(f'x − x0 ({unit_x})')
+
+    if flying.any():
+        gap = np.where(flying, result['z'] - result['surface_height'], np.nan)
+        factor_h, unit_h = scale(gap, 'm')
+        ax['height'].plot(t, gap * factor_h, color='C1', lw=1.4, label='height of the part above the surface')
+        ax['height'].set_ylabel(f'height ({unit_h})')
+        ax['height'].legend(loc='upper right', fontsize=8)
+
+    plot_modes(ax['mode'], t, result['mode'])
+    ax['mode'].set_xlabel(f'time ({unit_t})')
+    for a in axes:
+        a.grid(alpha=0.3)
+    fig.suptitle(title or 'Part on the actuated surface: strokes, velocity, friction, displacement, mode')
     return save(fig, path)
 
 
