@@ -46,6 +46,19 @@ demo: $(STAMP)
 	$(BIN)/micro-feeder resim $(OUT)/run
 	$(BIN)/micro-feeder hil --lockstep --params config/travelling_wave.yaml --set feed.target_x=0.8e-3
 
+# The figures README and docs/ show (docs/img), regenerated from the commands that make them.
+IMG := docs/img
+FIG_OUT := $(OUT)/figures
+figures: $(STAMP)
+	rm -rf $(FIG_OUT) && mkdir -p $(FIG_OUT)
+	$(BIN)/micro-feeder contact --plot $(IMG)/contact.png
+	$(BIN)/micro-feeder simulate --out $(FIG_OUT) --plot $(IMG)/simulate_default.png
+	$(BIN)/micro-feeder simulate --out $(FIG_OUT) --set stroke.frequency=3000 --duration 0.3 --plot $(IMG)/simulate_takeoff.png
+	$(BIN)/micro-feeder simulate --out $(FIG_OUT) --params config/travelling_wave.yaml --plot $(IMG)/simulate_travelling_wave.png
+	$(BIN)/micro-feeder sweep --vary stroke.frequency=100:5000:200 --set stroke.count=5 --out $(FIG_OUT) --plot $(IMG)/sweep_frequency.png
+	$(BIN)/micro-feeder run --duration 0.1 --set stroke.count=5 --real-time-factor 0.05 --record $(FIG_OUT)/run
+	$(BIN)/micro-feeder plot $(FIG_OUT)/run -o $(IMG)/run.png
+
 bench: $(STAMP)
 	for b in bench/bench_*.py; do $(BIN)/python $$b || exit 1; done
 
