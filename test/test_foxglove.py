@@ -22,6 +22,7 @@ from micro_feeder.viz.viewer import Viewer, ViewerError
 
 CLIENT_DIR = Path(__file__).parent / 'foxglove_client'
 MICRO_FEEDER = str(Path(sys.executable).parent / 'micro-feeder')
+SUBSCRIBED = ('/particle/pose', '/foxglove/scene', '/foxglove/friction_limit')
 FORWARDED = re.compile(r'(\d+) (/\S+?)(?:,|$)')
 
 
@@ -61,8 +62,9 @@ def listening_addresses(port: int) -> set[str]:
 
 
 def test_a_foxglove_client_decodes_pose_scene_and_sim_time() -> None:
-    """5 s of a real client subscribed to the pose and the scene: at least 95 % of what the server sent
-    decoded, the scene's part where the pose says, coloured by its mode, and sim time advancing."""
+    """5 s of a real client subscribed to the pose, the scene and the friction limit: at least 95 % of what
+    the server sent decoded, the scene's part where the pose says, coloured by its mode, Q_max right, and
+    sim time advancing."""
     if not (CLIENT_DIR / 'node_modules' / '@foxglove' / 'ws-protocol').is_dir():
         pytest.fail('the test client is not installed: run "make test" (npm ci in test/foxglove_client)')
     port = free_port()
@@ -70,7 +72,7 @@ def test_a_foxglove_client_decodes_pose_scene_and_sim_time() -> None:
     try:
         wait_listening(run)
         client = subprocess.run([shutil.which('node') or 'node', str(CLIENT_DIR / 'client.js'),
-                                 f'ws://127.0.0.1:{port}', '/particle/pose,/foxglove/scene', '5'],
+                                 f'ws://127.0.0.1:{port}', ','.join(SUBSCRIBED), '5'],
                                 capture_output=True, text=True, timeout=60)
         _, err = run.communicate(timeout=120)
     finally:
@@ -95,6 +97,11 @@ def test_a_foxglove_client_decodes_pose_scene_and_sim_time() -> None:
     assert part['x'] == pytest.approx(last_pose['x'], abs=1e-12)
     assert part['z'] == pytest.approx(last_pose['z'] + PART_SIZE / 2, abs=1e-12)
     assert part['label'] == 'stuck' and part['color'] == pytest.approx(MODE_COLORS['stuck'], abs=1e-6)
+    # friction against the static limit: at rest on the flat surface, Q_max at the weight is the seed's
+    # 0.8e-7 N (sliding starts at 40 m/s² for the 2e-9 kg part, docs/contact.md)
+    limit = report['topics']['/foxglove/friction_limit']
+    assert limit['decoded'] == limit['received'] >= 0.95 * sent['/foxglove/friction_limit'] > 250
+    assert limit['last']['q_max'] == pytest.approx(0.8e-7, rel=1e-3) and limit['last']['friction'] == 0.0
     assert report['time_monotonic'] and report['time_count'] > 50
     assert report['time_last'] - report['time_first'] > 2.0      # sim seconds over the 5 s
 

@@ -25,6 +25,7 @@ import numpy as np
 
 from ..plots.dynamics import plot_friction, plot_modes, plot_strokes, time_scale
 from ..plots.units import scale
+from .friction_limit import static_limit
 from .reader import LogReader
 from .series import MODES, PartSeries, part_series
 from .sim_parameters import recorded_parameters
@@ -164,17 +165,9 @@ def _flying_at(s: PartSeries, t: np.ndarray) -> np.ndarray:
 
 def _q_max(params: dict[str, Any], normal: np.ndarray, flying: np.ndarray) -> np.ndarray:
     """Q_max at each recorded normal load (NaN in flight, or without the recorded contact parameters)."""
-    q = np.full(normal.shape, np.nan)
     if not params or not normal.size:
-        return q
-    from ..physics.contact.model import ContactModel
-    from ..physics.contact.params import ContactParams
-    from ..physics.particle import ParticleParams
-    model = ContactModel(ContactParams.from_flat(params), ParticleParams.from_flat(params))
-    ok = ~flying & (normal > -model.pull_off_n) & np.isfinite(normal)
-    ok &= normal <= model.tables.load_n[-1]
-    q[ok] = model.q_max_at_load(normal[ok])
-    return q
+        return np.full(normal.shape, np.nan)
+    return np.where(flying, np.nan, static_limit(params)(normal))
 
 
 def _height(params: dict[str, Any], commands: CommandedStrokes | None, pose: dict[str, np.ndarray],

@@ -9,6 +9,9 @@ bytes, so Foxglove decodes them as it decodes a log. On top:
 * ``/foxglove/scene`` (``foxglove.SceneUpdate``) and ``/foxglove/transforms`` (``feeder`` -> ``contact``),
   built (:mod:`.scene`) from the latest ``particle/pose``, ``actuator/joint_states``,
   ``particle/contact_state`` and ``simulator/parameters`` (for the geometry) at most ``SCENE_RATE``;
+* ``/foxglove/friction_limit`` (JSON): friction T with ±Q_max(N), the static limit at the normal load of
+  each forwarded ``particle/contact_wrench`` (N; Q_max null in flight), from the contact model of the
+  latest ``simulator/parameters`` (built when a viewer first subscribes, off the simulation's thread);
 * sim time (the stamp of ``/clock`` and ``particle/pose``) broadcast with the protocol's ``time``
   capability at most ``TIME_RATE``, and used as every forwarded message's log time.
 
@@ -31,6 +34,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import foxglove
+import numpy as np
 from foxglove.channels import FrameTransformsChannel, SceneUpdateChannel
 from foxglove.websocket import Capability
 
@@ -46,11 +50,18 @@ TIME_RATE = 50.0        # Hz (wall): sim time broadcasts
 STATE_TOPICS = ('particle/pose', 'particle/twist', 'particle/contact_wrench', 'actuator/joint_states', '/clock')
 SCENE_TOPIC = '/foxglove/scene'
 TRANSFORMS_TOPIC = '/foxglove/transforms'
+FRICTION_TOPIC = '/foxglove/friction_limit'
+FRICTION_SCHEMA = {
+    'title': 'micro_feeder friction limit', 'type': 'object',
+    'properties': {'friction': {'type': 'number', 'description': 'friction T along the surface tangent (N)'},
+                   'q_max': {'type': ['number', 'null'], 'description': 'static limit Q_max(N) (N); null in flight'},
+                   'minus_q_max': {'type': ['number', 'null'], 'description': '-Q_max (N)'},
+                   'normal_load': {'type': 'number', 'description': 'normal load N (N)'}}}
 NOT_FORWARDED = ('/parameter_events',)     # rclpy's own, published by every node
 
 # What the scene is built from: role -> topic (relative names match in any namespace).
 ROLES = {'pose': 'particle/pose', 'joints': 'actuator/joint_states', 'mode': 'particle/contact_state',
-         'parameters': 'simulator/parameters'}
+         'parameters': 'simulator/parameters', 'wrench': 'particle/contact_wrench'}
 
 
 class ViewerError(RuntimeError):
@@ -128,7 +139,11 @@ class Viewer:
         self._by_role: dict[str, ForwardedTopic] = {}
         self.scene_channel = SceneUpdateChannel(SCENE_TOPIC, context=self.context)
         self.transforms_channel = FrameTransformsChannel(TRANSFORMS_TOPIC, context=self.context)
+        self.friction_channel = foxglove.Channel(FRICTION_TOPIC, schema=FRICTION_SCHEMA, context=self.context)
+        self._friction_limit: Any = None            # (parameters message it was built from, Q_max function)
+        self._building = threading.Thread()         # builds the friction limit when the parameters change
         self.scenes_sent = 0
+        self.friction_sent = 0
         self.sim_ns = 0
         self._scene: FeederScene | None = None
         self._scene_parameters: Any = None
@@ -197,9 +212,12 @@ class Viewer:
         now = time.monotonic()
         if forwarded.time_source:
             self.sim_ns = stamp_ns(msg)
-        if now - forwarded.last_sent >= forwarded.period and forwarded.channel.has_sinks():
+        if now - forwarded.last_sent >= forwarded.period:
             forwarded.last_sent = now
-            self._send(forwarded, msg)
+            if forwarded.channel.has_sinks():
+                self._send(forwarded, msg)
+            if forwarded.role == 'wrench':
+                self._send_friction_limit(msg)
         if forwarded.role == 'pose':
             self._on_pose(now)
 
@@ -210,9 +228,48 @@ class Viewer:
         forwarded.sent += 1
 
     def _on_subscribe(self, topic: str) -> None:
+        if topic == FRICTION_TOPIC:
+            self._build_friction_limit()
         forwarded = self.topics.get(topic)
         if forwarded is not None and forwarded.latched and forwarded.latest is not None:
             self._send(forwarded, forwarded.latest)
+
+    def _build_friction_limit(self) -> None:
+        """The static limit of the latest recorded parameters (the contact tables take tens of ms: built on
+        the server's thread when a viewer subscribes, not on the thread that publishes)."""
+        forwarded = self._by_role.get('parameters')
+        latest = forwarded.latest if forwarded is not None else None
+        if latest is None or (self._friction_limit is not None and self._friction_limit[0] is latest):
+            return
+        event = self._latest('parameters')
+        from ..logs.friction_limit import static_limit
+        try:
+            limit = static_limit({p.name: parameter_value(p.value) for p in event.new_parameters})
+        except ValueError:
+            return
+        self._friction_limit = (latest, limit)
+
+    def _send_friction_limit(self, wrench: Any) -> None:
+        if not self.friction_channel.has_sinks():
+            return
+        parameters = self._by_role.get('parameters')
+        current = parameters.latest if parameters is not None else None
+        stale = self._friction_limit is None or self._friction_limit[0] is not current
+        if stale and current is not None and not self._building.is_alive():
+            self._building = threading.Thread(target=self._build_friction_limit, name='foxglove-friction-limit',
+                                              daemon=True)
+            self._building.start()
+        if self._friction_limit is None:
+            return
+        if isinstance(wrench, bytes):
+            from rclpy.serialization import deserialize_message
+            wrench = deserialize_message(wrench, self._by_role['wrench'].msg_type)
+        force = wrench.wrench.force
+        q = float(self._friction_limit[1](np.array([force.z]))[0])
+        q_max = None if math.isnan(q) else q
+        self.friction_sent += 1
+        self.friction_channel.log({'friction': force.x, 'q_max': q_max, 'minus_q_max': None if q_max is None else -q,
+                                   'normal_load': force.z}, log_time=self.sim_ns)
 
     # -- sim time and scene ---------------------------------------------------------------------------
 
@@ -275,6 +332,8 @@ class Viewer:
         """``foxglove: ws://…: forwarded 1001 /particle/pose, …`` (messages sent to subscribed viewers)."""
         counts = [(f.sent, f.topic) for f in self.topics.values() if f.sent]
         counts.append((self.scenes_sent, SCENE_TOPIC))
+        if self.friction_sent:
+            counts.append((self.friction_sent, FRICTION_TOPIC))
         return f'foxglove: {self.url}: forwarded ' + ', '.join(f'{n} {t}' for n, t in counts)
 
     def close(self) -> None:

@@ -1,6 +1,6 @@
 // A Foxglove WebSocket client (npm @foxglove/ws-protocol, subprotocol foxglove.sdk.v1) for the tests:
 // subscribes to the given topics, decodes every message as Foxglove does (ros2msg schemas + CDR with
-// @foxglove/rosmsg2-serialization, protobuf schemas with protobufjs) for SECONDS, records the server's
+// @foxglove/rosmsg2-serialization, protobuf schemas with protobufjs, JSON) for SECONDS, records the server's
 // time broadcasts, and prints one JSON report on stdout.
 //   node client.js ws://127.0.0.1:8765 /particle/pose,/foxglove/scene 5
 "use strict";
@@ -28,6 +28,10 @@ function decoderFor(channel) {
     const type = protobuf.Root.fromDescriptor(set).lookupType(channel.schemaName);
     return (data) => type.toObject(type.decode(data), { longs: Number, defaults: true });
   }
+  if (channel.encoding === "json") {
+    const text = new TextDecoder();
+    return (data) => JSON.parse(text.decode(data));
+  }
   throw new Error(`${channel.topic}: no decoder for ${channel.encoding}/${channel.schemaEncoding}`);
 }
 
@@ -46,6 +50,9 @@ function summarize(topic, msg) {
              part: sphere ? { x: sphere.pose.position.x, z: sphere.pose.position.z, diameter: sphere.size.x,
                               color: [sphere.color.r, sphere.color.g, sphere.color.b],
                               label: byId.part.texts[0]?.text } : null };
+  }
+  if ("q_max" in msg) {
+    return { friction: msg.friction, q_max: msg.q_max, normal_load: msg.normal_load };
   }
   return {};
 }
