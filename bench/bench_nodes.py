@@ -7,7 +7,13 @@ a trajectory command to the first pose that reflects it (p50/p99; the pose's til
 stroke does, since the part sits on the bump's flank). Prints the load average before and after: the
 figures are only comparable at a similar load (2 cores).
 
-    .venv/bin/python bench/bench_nodes.py [--seconds 10] [--commands 60]
+Then the live view (``--foxglove``): CPU share of a ``micro-feeder run`` process (simulator and actuator
+nodes in one process, the actuator idle after its burst) without ``--foxglove``, with it and no viewer
+(target <= 25 % of one core: the hook costs nothing measurable), and with one viewer subscribed to every
+topic the server advertises (the test client test/foxglove_client, installed by ``make test``; target
+<= 35 %).
+
+    .venv/bin/python bench/bench_nodes.py [--seconds 10] [--commands 60] [--viewer-seconds 10]
 """
 
 from __future__ import annotations
@@ -81,6 +87,8 @@ def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--seconds', type=float, default=10.0, help='steady-state measurement window (s)')
     parser.add_argument('--commands', type=int, default=60, help='trajectory commands for the latency')
+    parser.add_argument('--viewer-seconds', type=float, default=10.0,
+                        help='window of each live-view CPU measurement (s); 0 skips them')
     args = parser.parse_args()
     exe = shutil.which('simulator', path=str(Path(sys.executable).parent))
     proc = subprocess.Popen([exe, '--ros-args', '-p', 'publish_rate:=1000.0'], stdout=subprocess.DEVNULL,
@@ -150,7 +158,52 @@ def main() -> int:
           f'    target: <= 1.5 ms')
     print(f'  command -> pose latency p50 {np.percentile(lat, 50):6.2f} ms, p99 {np.percentile(lat, 99):6.2f} ms '
           f'({lat.size}/{args.commands} commands seen)')
+    if args.viewer_seconds > 0:
+        return live_view_cpu(args.viewer_seconds)
     return 0
+
+
+CLIENT = Path(__file__).parents[1] / 'test' / 'foxglove_client'
+
+
+def live_view_cpu(seconds: float) -> int:
+    """CPU share of ``micro-feeder run`` without --foxglove, with it and no viewer, and with one viewer."""
+    if not (CLIENT / 'node_modules').is_dir():
+        print(f'live view: skipped, no test client (run: cd {CLIENT} && npm ci)', file=sys.stderr)
+        return 1
+    load0 = os.getloadavg()[0]
+    results = [('run, no --foxglove', _run_cpu(seconds, None, False), 25),
+               ('run --foxglove, no viewer', _run_cpu(seconds, 18900 + os.getpid() % 500, False), 25),
+               ('run --foxglove, 1 viewer (all topics)', _run_cpu(seconds, 19400 + os.getpid() % 500, True), 35)]
+    print(f'live view: CPU share of the micro-feeder run process, {seconds:g} s each '
+          f'(load average {load0:.2f} -> {os.getloadavg()[0]:.2f})')
+    for what, cpu, target in results:
+        print(f'  {what:38s} {cpu * 100:6.1f} %    target: <= {target} % of one core')
+    return 0
+
+
+def _run_cpu(seconds: float, port: int | None, viewer: bool) -> float:
+    """CPU share (cores) of a ``micro-feeder run`` over ``seconds`` once it runs (and the viewer subscribed)."""
+    exe = shutil.which('micro-feeder', path=str(Path(sys.executable).parent))
+    cmd = [exe, 'run', '--duration', str(seconds + 30)] + (['--foxglove', f'127.0.0.1:{port}'] if port else [])
+    with open(os.devnull, 'w') as devnull:
+        proc = subprocess.Popen(cmd, stdout=devnull, stderr=devnull)
+        client = None
+        try:
+            time.sleep(4.0)             # started, kernel loaded, the actuator's burst over
+            if viewer:
+                client = subprocess.Popen(['node', str(CLIENT / 'client.js'), f'ws://127.0.0.1:{port}', '*',
+                                           str(seconds + 4)], stdout=devnull, stderr=devnull)
+                time.sleep(2.0)         # connected and subscribed
+            wall0, cpu0 = time.perf_counter(), cpu_seconds(proc.pid)
+            time.sleep(seconds)
+            return (cpu_seconds(proc.pid) - cpu0) / (time.perf_counter() - wall0)
+        finally:
+            if client is not None:
+                client.kill()
+                client.wait()
+            proc.send_signal(signal.SIGINT)
+            proc.wait(timeout=30)
 
 
 if __name__ == '__main__':

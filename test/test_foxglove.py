@@ -164,3 +164,28 @@ def test_a_port_in_use_is_refused_with_the_reason_and_no_log(tmp_path: Path) -> 
     assert result.returncode == 2
     assert f'--foxglove 127.0.0.1:{port}: cannot listen' in result.stderr
     assert not log.exists()
+
+
+def test_the_layout_plots_fields_the_live_view_sends() -> None:
+    """Every panel path of config/foxglove_layout.json names a topic the viewer forwards and a field its
+    schema has (a typo would leave a panel silently empty)."""
+    from micro_feeder.logs.schemas import field_types
+    from micro_feeder.logs.topics import TOPICS
+    from micro_feeder.viz.viewer import FRICTION_SCHEMA, FRICTION_TOPIC, SCENE_TOPIC, TRANSFORMS_TOPIC
+
+    layout = json.loads((Path(__file__).parents[1] / 'config' / 'foxglove_layout.json').read_text())
+    ros = {('/' + t.name.lstrip('/')): t.type for t in TOPICS}
+    paths = [p['value'] for panel in layout['configById'].values() for p in panel.get('paths', [])]
+    assert len(paths) >= 10
+    for path in paths:
+        topic, _, fields = path.partition('.')
+        first = re.split(r'[.\[]', fields)[0]
+        if topic == FRICTION_TOPIC:
+            assert first in FRICTION_SCHEMA['properties'], path
+        else:
+            assert topic in ros, path
+            assert first in dict(field_types(ros[topic])), path
+    three_d = layout['configById']['3D!feeder']
+    assert set(three_d['topics']) == {SCENE_TOPIC, TRANSFORMS_TOPIC, '/surface/markers'}
+    panels = re.findall(r'"([A-Za-z0-9]+![a-z]+)"', json.dumps(layout['layout']))
+    assert sorted(panels) == sorted(layout['configById'])

@@ -2,7 +2,7 @@
 // subscribes to the given topics, decodes every message as Foxglove does (ros2msg schemas + CDR with
 // @foxglove/rosmsg2-serialization, protobuf schemas with protobufjs, JSON) for SECONDS, records the server's
 // time broadcasts, and prints one JSON report on stdout.
-//   node client.js ws://127.0.0.1:8765 /particle/pose,/foxglove/scene 5
+//   node client.js ws://127.0.0.1:8765 /particle/pose,/foxglove/scene 5    (TOPICS "*": all advertised)
 "use strict";
 const { FoxgloveClient } = require("@foxglove/ws-protocol");
 const { parse: parseRosMsg } = require("@foxglove/rosmsg");
@@ -12,7 +12,8 @@ const descriptor = require("protobufjs/ext/descriptor");
 const WebSocket = require("ws");
 
 const [url, topicList, secondsText] = process.argv.slice(2);
-const wanted = new Set(topicList.split(","));
+const everything = topicList === "*"; // "*": every topic the server advertises
+const wanted = new Set(everything ? [] : topicList.split(","));
 const seconds = Number(secondsText);
 const report = { topics: {}, times: [], advertised: [], errors: [] };
 const decoders = new Map(); // channel id -> { topic, decode }
@@ -64,7 +65,7 @@ client.on("serverInfo", (info) => { report.server = { name: info.name, capabilit
 client.on("advertise", (channels) => {
   for (const channel of channels) {
     report.advertised.push(channel.topic);
-    if (!wanted.has(channel.topic)) continue;
+    if (!everything && !wanted.has(channel.topic)) continue;
     try {
       decoders.set(channel.id, { topic: channel.topic, decode: decoderFor(channel) });
     } catch (err) {
@@ -74,7 +75,7 @@ client.on("advertise", (channels) => {
     report.topics[channel.topic] = { received: 0, decoded: 0, schema: channel.schemaName };
     subscriptions.set(client.subscribe(channel.id), channel.id);
   }
-  if (!started && subscriptions.size === wanted.size) {
+  if (!started && (everything ? subscriptions.size > 0 : subscriptions.size === wanted.size)) {
     started = true;
     setTimeout(finish, seconds * 1000);
   }
