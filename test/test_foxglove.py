@@ -8,6 +8,7 @@ import json
 import os
 import re
 import shutil
+import signal
 import socket
 import subprocess
 import sys
@@ -189,3 +190,26 @@ def test_the_layout_plots_fields_the_live_view_sends() -> None:
     assert set(three_d['topics']) == {SCENE_TOPIC, TRANSFORMS_TOPIC, '/surface/markers'}
     panels = re.findall(r'"([A-Za-z0-9]+![a-z]+)"', json.dumps(layout['layout']))
     assert sorted(panels) == sorted(layout['configById'])
+
+
+def test_replay_forwards_what_the_player_publishes(tmp_path: Path) -> None:
+    """``replay --foxglove``: the recorded CDR bytes go out as they are, and the scene is built from them."""
+    from test_log_plot import write_log
+    write_log(tmp_path / 'log')
+    port = free_port()
+    replay = subprocess.Popen([MICRO_FEEDER, 'replay', str(tmp_path / 'log'), '--loop', '--foxglove',
+                               f'127.0.0.1:{port}'], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        wait_listening(replay)
+        client = subprocess.run(['node', str(CLIENT_DIR / 'client.js'), f'ws://127.0.0.1:{port}',
+                                 '/particle/pose,/foxglove/scene', '3'], capture_output=True, text=True, timeout=60)
+    finally:
+        replay.send_signal(signal.SIGINT)
+        _, err = replay.communicate(timeout=60)
+    report = json.loads(client.stdout)
+    assert not report['errors'], report['errors']
+    pose, scene = report['topics']['/particle/pose'], report['topics']['/foxglove/scene']
+    assert pose['decoded'] == pose['received'] > 100 and scene['decoded'] == scene['received'] > 20
+    assert scene['last']['part']['x'] == pytest.approx(pose['last']['x'], abs=3e-6)   # ≤ 1/30 s apart
+    assert scene['last']['actuators'] == 2                # the recorded geometry: two actuators
+    assert 'forwarded' in err.splitlines()[-1]

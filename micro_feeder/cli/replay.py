@@ -47,9 +47,9 @@ def run(args: argparse.Namespace) -> int:
     def strings(values: list[str]) -> str:
         return '[' + ','.join(f'"{v}"' for v in values) + ']' if values else '[""]'
 
+    argv = ['replay', '--ros-args', '-p', f'log:={args.log}', '-p', f'rate:={args.rate}',
+            '-p', f'loop:={str(args.loop).lower()}', '-p', f'start_offset:={args.start_offset}',
+            '-p', f'topics:={strings(args.topics)}', '-p', f'remap:={strings(args.remap)}',
+            '-p', f'publish_clock:={str(args.clock).lower()}']
     with live_view(args.foxglove) as viewer:
-        return replay_main(['replay', '--ros-args', '-p', f'log:={args.log}', '-p', f'rate:={args.rate}',
-                            '-p', f'loop:={str(args.loop).lower()}', '-p', f'start_offset:={args.start_offset}',
-                            '-p', f'topics:={strings(args.topics)}', '-p', f'remap:={strings(args.remap)}',
-                            '-p', f'publish_clock:={str(args.clock).lower()}'],
-                           tap=viewer.tap if viewer is not None else None)
+        return replay_main(argv) if viewer is None else replay_main(argv, tap=viewer.tap)
