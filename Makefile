@@ -59,7 +59,7 @@ figures: $(STAMP)
 	$(BIN)/micro-feeder run --duration 0.1 --set stroke.count=5 --real-time-factor 0.05 --record $(FIG_OUT)/run
 	$(BIN)/micro-feeder plot $(FIG_OUT)/run -o $(IMG)/run.png
 
-bench: $(STAMP)
+bench: $(STAMP) foxglove-client
 	for b in bench/bench_*.py; do $(BIN)/python $$b || exit 1; done
 
 # Re-pin after changing requirements: freeze a fresh venv, drop the ROS wheels' bare names.
