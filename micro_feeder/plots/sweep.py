@@ -230,3 +230,20 @@ def plot_distribution(data: dict[str, np.ndarray], path: Path | str, context: st
                  f'{np.mean(~data["settled"]):.0%} not at rest)\n{context}')
     ax.grid(alpha=0.3)
     return save(fig, path)
+
+
+def plot_convergence(history: Sequence[tuple[int, float]], objective: str, score: str, path: Path | str) -> Path:
+    """Best score found against evaluations used (one point per generation); scores of runs that break
+    a constraint (≥ 1e12) are left out."""
+    evaluations = np.array([h[0] for h in history], dtype=float)
+    best = np.array([h[1] for h in history], dtype=float)
+    feasible = best < 1e12
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    ax.plot(evaluations[feasible], best[feasible], '.-', color='C0')
+    if (~feasible).any():
+        ax.text(0.02, 0.95, f'{(~feasible).sum()} generations with no feasible run yet', transform=ax.transAxes,
+                fontsize=8, va='top')
+    ax.set(xlabel='evaluations (model runs)', ylabel=f'best {score} so far',
+           title=f'Convergence of the search: {objective}')
+    ax.grid(alpha=0.3)
+    return save(fig, path)
