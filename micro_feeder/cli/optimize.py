@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from pathlib import Path
@@ -14,10 +13,11 @@ from tqdm import tqdm
 from ..explore.designs import is_integer, parse_range
 from ..explore.evaluate import Job
 from ..explore.optimize import CONSTRAINTS, DIRECTIONS, OptimizeError, Problem, optimize
-from ..explore.runners import RunnerError, make_runner
+from ..explore.runners import RunnerError
 from ..settings import SettingsError
 from . import CommandError
 from ._common import settings_from_args
+from ._explore import add_runner_options, runner_from_args
 from .simulate import add_run_options
 
 
@@ -55,9 +55,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument('--popsize', type=int, default=10, metavar='K',
                         help='population: K × number of parameters (10)')
     parser.add_argument('--seed', type=int, default=0, help='seed of the search (default 0)')
-    parser.add_argument('--processes', type=int, default=os.cpu_count() or 1, metavar='N',
-                        help='local worker processes (default: all cores)')
-    parser.add_argument('--scheduler', metavar='tcp://HOST:PORT', help='run on this Dask cluster instead')
+    add_runner_options(parser)
     parser.set_defaults(func=run)
 
 
@@ -82,10 +80,7 @@ def build_problem(args: argparse.Namespace) -> Problem:
 def run(args: argparse.Namespace) -> int:
     problem = build_problem(args)
     out = Path(args.out)
-    try:
-        runner = make_runner(max(1, args.processes), args.scheduler)
-    except RunnerError as err:
-        raise CommandError(str(err)) from err
+    runner = runner_from_args(args)
     bar = tqdm(total=args.generations, file=sys.stderr, unit='gen', desc='optimize')
 
     def progress(evaluations: int, best: float) -> None:

@@ -6,7 +6,6 @@ import argparse
 import csv
 import json
 import math
-import os
 import sys
 import time
 from pathlib import Path
@@ -16,12 +15,13 @@ from tqdm import tqdm
 
 from ..explore.designs import DESIGNS, Grid, RunPlan, Sampled, parse_axis, parse_perturbation, parse_range
 from ..explore.evaluate import RESULT_COLUMNS, Job, model_for
-from ..explore.runners import Runner, RunnerError, make_runner
-from ..explore.sweep import PointSummary, base_values, estimate_seconds, run_plan, too_big
+from ..explore.runners import Runner, RunnerError
+from ..explore.sweep import MAX_RUNS, PointSummary, base_values, estimate_seconds, run_plan, too_big
 from ..physics.parameters import ParameterError
 from ..settings import SettingsError
 from . import CommandError
 from ._common import settings_from_args
+from ._explore import add_runner_options, runner_from_args
 from .simulate import add_run_options
 
 SHOWN_ROWS = 40   # the terminal table shows at most this many rows (the CSV has them all)
@@ -55,12 +55,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument('--replicates', type=int, default=100, metavar='N',
                         help='with --perturb: Monte Carlo runs per point (default 100)')
     parser.add_argument('--seed', type=int, default=0, help='seed of --samples and --perturb draws (default 0)')
-    parser.add_argument('--processes', type=int, default=os.cpu_count() or 1, metavar='N',
-                        help='local worker processes (default: all cores)')
-    parser.add_argument('--scheduler', metavar='tcp://HOST:PORT',
-                        help='run on the Dask cluster of this scheduler instead (docs/explore.md)')
+    add_runner_options(parser)
     parser.add_argument('--force', action='store_true',
-                        help=f'run even when the sweep is huge (more than {1_000_000:,} runs or over an hour)')
+                        help=f'run even when the sweep is huge (more than {MAX_RUNS:,} runs or over an hour)')
     parser.set_defaults(func=run)
 
 
@@ -94,10 +91,7 @@ def run(args: argparse.Namespace) -> int:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise CommandError(f'cannot write to {err.filename}: {err.strerror}') from err
-    try:
-        runner = make_runner(max(1, args.processes), args.scheduler)
-    except RunnerError as err:
-        raise CommandError(str(err)) from err
+    runner = runner_from_args(args)
     with runner:
         estimate = estimate_seconds(job, plan, runner.workers)
         reason = too_big(len(plan), estimate)
