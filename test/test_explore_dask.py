@@ -1,6 +1,7 @@
 """Runs on a real Dask cluster (a ``dask scheduler`` and two ``dask worker`` processes on 127.0.0.1, random
-ports, started here as a user would) give the same table as the local run, also when a worker is killed
-mid-run; local worker processes stop with the command (Ctrl-C, or the command killed)."""
+ports, started here as a user would) give the same results as the local run (sweep table, optimum,
+calibration), also when a worker is killed mid-run; local worker processes stop with the command (Ctrl-C,
+or the command killed)."""
 
 from __future__ import annotations
 
@@ -14,10 +15,13 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
+from test_calibrate import recorded  # noqa: F401 - the recorded stepped log (a module fixture)
 
+from micro_feeder.explore.calibrate import calibrate
 from micro_feeder.explore.designs import Grid, RunPlan, parse_axis, parse_perturbation
 from micro_feeder.explore.evaluate import Job
-from micro_feeder.explore.runners import DaskCluster, InProcess
+from micro_feeder.explore.optimize import Problem, optimize
+from micro_feeder.explore.runners import DaskCluster, InProcess, LocalProcesses
 from micro_feeder.explore.sweep import run_plan
 
 BIN = Path(sys.executable).parent
@@ -97,6 +101,18 @@ def test_a_worker_killed_mid_run_costs_only_its_tasks(cluster):
         killer.join(timeout=5)
     assert victim.wait(timeout=5) == -signal.SIGKILL
     assert rows == expected
+
+
+def test_optimize_and_calibrate_on_the_cluster_equal_the_local_run(cluster, recorded):  # noqa: F811
+    problem = Problem(Job({'stroke.count': 2, 'stroke.frequency': 1200.0}), ('particle.x0',), ((0.1e-3, 1.4e-3),))
+    start = {'contact.friction_scale': 0.0115, 'particle.x0': 0.55e-3}
+    results = []
+    for runner in (LocalProcesses(2), DaskCluster(cluster['address'])):
+        with runner:
+            results.append((optimize(problem, runner, seed=4, max_generations=15).as_dict(),
+                            calibrate([str(recorded)], start, runner).as_dict()))
+    assert results[0] == results[1]
+    assert results[0][0]['evaluations'] > 20 and results[0][1]['converged']
 
 
 def _sweep_process(*extra: str) -> subprocess.Popen:

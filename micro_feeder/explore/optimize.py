@@ -189,11 +189,9 @@ def optimize(problem: Problem, runner: Runner, seed: int = 0, max_generations: i
         if progress is not None:
             progress(*history[-1])
 
-    parallel = runner.workers > 1
-    result = differential_evolution(
+    result = differential_evolution(             # 'deferred': one batch per generation, the same on any runner
         problem, list(problem.bounds), seed=seed, maxiter=max_generations, popsize=popsize, tol=tol, polish=False,
-        init='latinhypercube', updating='deferred' if parallel else 'immediate',
-        workers=runner.as_map() if parallel else 1, callback=callback,
+        init='latinhypercube', updating='deferred', workers=runner.as_map(), callback=callback,
         integrality=list(problem.integers) if problem.integers else None)
     score, row = problem.evaluate(result.x)
     return OptimizeResult(problem.changes(result.x), row, score, row['violation'] == 0, int(result.nfev),
