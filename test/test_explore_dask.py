@@ -5,7 +5,6 @@ or the command killed)."""
 
 from __future__ import annotations
 
-import json
 import signal
 import subprocess
 import sys
@@ -18,6 +17,7 @@ import pytest
 from test_calibrate import recorded  # noqa: F401 - the recorded stepped log (a module fixture)
 
 from micro_feeder.explore.calibrate import calibrate
+from micro_feeder.explore.cluster import LocalCluster, local_cluster
 from micro_feeder.explore.designs import Grid, RunPlan, parse_axis, parse_perturbation
 from micro_feeder.explore.evaluate import Job
 from micro_feeder.explore.optimize import Problem, optimize
@@ -36,39 +36,12 @@ def _wait_for(predicate, timeout: float, what: str) -> None:
         time.sleep(0.1)
 
 
-def _start(args: list[str], log: Path) -> subprocess.Popen:
-    """``dask ARGS`` with its output in ``log``."""
-    with log.open('w') as handle:
-        return subprocess.Popen([str(BIN / 'dask'), *args], stdout=subprocess.DEVNULL, stderr=handle)
-
-
 @pytest.fixture(scope='module')
-def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
+def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[LocalCluster]:
     """``dask scheduler`` + 2 single-threaded ``dask worker`` processes (no nanny: killing one is a real
     worker death), all on 127.0.0.1 with ports the OS picks."""
-    folder = tmp_path_factory.mktemp('dask')
-    info = folder / 'scheduler.json'
-    common = ['--no-dashboard']
-    procs = [_start(['scheduler', '--host', '127.0.0.1', '--port', '0', '--scheduler-file', str(info), *common],
-                    folder / 'scheduler.log')]
-    try:
-        _wait_for(info.exists, START_TIMEOUT, 'the scheduler file')
-        for i in range(2):
-            procs.append(_start(['worker', '--scheduler-file', str(info), '--host', '127.0.0.1', '--nthreads', '1',
-                                 '--no-nanny', '--name', f'w{i}', *common], folder / f'worker{i}.log'))
-        address = json.loads(info.read_text())['address']
-        from distributed import Client
-        with Client(address, timeout=START_TIMEOUT) as client:
-            client.wait_for_workers(2, timeout=START_TIMEOUT)
-        yield {'address': address, 'workers': procs[1:]}
-    finally:
-        for proc in procs:
-            proc.terminate()
-        for proc in procs:
-            try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
+    with local_cluster(tmp_path_factory.mktemp('dask'), workers=2, timeout=START_TIMEOUT) as started:
+        yield started
 
 
 def test_cli_sweep_on_the_cluster_equals_the_local_run(cluster, tmp_path, capsys):
@@ -76,7 +49,7 @@ def test_cli_sweep_on_the_cluster_equals_the_local_run(cluster, tmp_path, capsys
     args = ['sweep', '--vary', 'stroke.frequency=500:3000:12', '--vary', 'stroke.amplitude=40e-6:160e-6:4',
             '--set', 'stroke.count=2']
     assert main([*args, '--processes', '2', '--out', str(tmp_path / 'local')]) == 0
-    assert main([*args, '--scheduler', cluster['address'], '--out', str(tmp_path / 'dask')]) == 0
+    assert main([*args, '--scheduler', cluster.address, '--out', str(tmp_path / 'dask')]) == 0
     out = capsys.readouterr().out
     assert 'Dask cluster' in out
     local, remote = ((tmp_path / d / 'sweep.csv').read_text() for d in ('local', 'dask'))
@@ -88,9 +61,9 @@ def test_a_worker_killed_mid_run_costs_only_its_tasks(cluster):
                    (parse_perturbation('contact.friction_scale=normal:10%'),), replicates=8, seed=2)
     job = Job({'stroke.count': 2})
     expected = list(run_plan(job, plan, InProcess()))
-    victim = cluster['workers'][0]
+    victim = cluster.workers[0]
     rows = []
-    with DaskCluster(cluster['address'], window=8) as runner:
+    with DaskCluster(cluster.address, window=8) as runner:
         def kill_after_first_rows() -> None:
             _wait_for(lambda: len(rows) >= 2, 60, 'first rows')
             victim.send_signal(signal.SIGKILL)
@@ -107,7 +80,7 @@ def test_optimize_and_calibrate_on_the_cluster_equal_the_local_run(cluster, reco
     problem = Problem(Job({'stroke.count': 2, 'stroke.frequency': 1200.0}), ('particle.x0',), ((0.1e-3, 1.4e-3),))
     start = {'contact.friction_scale': 0.0115, 'particle.x0': 0.55e-3}
     results = []
-    for runner in (LocalProcesses(2), DaskCluster(cluster['address'])):
+    for runner in (LocalProcesses(2), DaskCluster(cluster.address)):
         with runner:
             results.append((optimize(problem, runner, seed=4, max_generations=15).as_dict(),
                             calibrate([str(recorded)], start, runner).as_dict()))

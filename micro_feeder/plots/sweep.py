@@ -176,9 +176,10 @@ def plot_map(names: Sequence[str], data: dict[str, np.ndarray], value: str | np.
         ax.add_artist(ax.legend(fontsize=8, title='regime', loc='upper left'))
     bar = fig.colorbar(mesh, ax=ax, label=f'distance per stroke ({unit})')
     bar.set_ticks(symlog_ticks(norm.linthresh, top))
-    ax.legend(handles=[Patch(facecolor='none', edgecolor='0.5', hatch='///' if gridded else None,
-                             label='part not at rest when the run ended: no distance')],
-              fontsize=8, loc='lower right')
+    if not np.isfinite(z).all():
+        ax.legend(handles=[Patch(facecolor='none', edgecolor='0.5', hatch='///' if gridded else None,
+                                 label='part not at rest when the run ended: no distance')],
+                  fontsize=8, loc='lower right')
     ax.set(xlabel=xlabel, ylabel=ylabel,
            title=title + (f'\n{context}' if context else '') + '\nlines: regime boundaries (stuck | slides | flies)')
     return save(fig, path)
@@ -186,7 +187,7 @@ def plot_map(names: Sequence[str], data: dict[str, np.ndarray], value: str | np.
 
 def symlog_ticks(linthresh: float, top: float) -> list[float]:
     """0 and ±10^k for the decades between the linear threshold and the top of a symmetric log scale."""
-    decades = 10.0 ** np.arange(np.ceil(np.log10(linthresh * 10)), np.floor(np.log10(top)) + 1)
+    decades = 10.0 ** np.arange(np.ceil(np.log10(linthresh)), np.floor(np.log10(top)) + 1)
     return [*(-decades[::-1]), 0.0, *decades]
 
 
