@@ -126,7 +126,7 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-SCORES = {'max-distance': 'score (µm per stroke, signed so that lower is better)', 'target': 'amplitude (µm)'}
+SCORES = {'max-distance': 'score (µm per stroke; lower is better)', 'target': 'amplitude (µm)'}
 
 
 def describe_objective(problem: Problem) -> str:

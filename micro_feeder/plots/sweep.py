@@ -244,7 +244,7 @@ def plot_convergence(history: Sequence[tuple[int, float]], objective: str, score
     if (~feasible).any():
         ax.text(0.02, 0.95, f'{(~feasible).sum()} generations with no feasible run yet', transform=ax.transAxes,
                 fontsize=8, va='top')
-    ax.set(xlabel='evaluations (model runs)', ylabel=f'best {score} so far',
+    ax.set(xlabel='evaluations (model runs)', ylabel=f'best {score}',
            title=f'Convergence of the search: {objective}')
     ax.grid(alpha=0.3)
     return save(fig, path)
