@@ -19,6 +19,7 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.colors import ListedColormap, SymLogNorm
+from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from ..explore.designs import Perturbation, RunPlan
@@ -177,11 +178,13 @@ def plot_map(names: Sequence[str], data: dict[str, np.ndarray], value: str | np.
     bar = fig.colorbar(mesh, ax=ax, label=f'distance per stroke ({unit})')
     bar.set_ticks(symlog_ticks(norm.linthresh, top))
     if not np.isfinite(z).all():
-        ax.legend(handles=[Patch(facecolor='none', edgecolor='0.5', hatch='///' if gridded else None,
-                                 label='part not at rest when the run ended: no distance')],
-                  fontsize=8, loc='lower right')
+        label = 'part not at rest when the run ended: no distance'
+        handle = (Patch(facecolor='none', edgecolor='0.5', hatch='///', label=label) if gridded else
+                  Line2D([], [], marker='x', color='0.4', ls='none', label=label))
+        ax.legend(handles=[handle], fontsize=8, loc='lower right')
     ax.set(xlabel=xlabel, ylabel=ylabel,
-           title=title + (f'\n{context}' if context else '') + '\nlines: regime boundaries (stuck | slides | flies)')
+           title=title + (f'\n{context}' if context else '')
+           + ('\nlines: regime boundaries (stuck | slides | flies)' if gridded else '\nmarker outline: regime'))
     return save(fig, path)
 
 
