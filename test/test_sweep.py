@@ -154,6 +154,8 @@ def test_map_and_curve_plots(tmp_path, capsys):
     (['--vary', 'surface.centers=0:1:3'], 'scalar'),
     (['--vary', 'stroke.frequency=1:2', '--samples', '5', '--vary', 'nonsense=1:2'], 'not a parameter'),
     (['--vary', 'stroke.frequency=3000:1000', '--samples', '5'], 'LOW < HIGH'),
+    (['--vary', 'stroke.frequency=1000:3000:5', '--samples', '5'], 'NAME=LOW:HIGH'),
+    (['--perturb', 'contact.beta=normal:1%', '--samples', '5'], '--samples needs'),
     (['--vary', 'stroke.frequency=1e3', '--perturb', 'contact.beta=gauss:1'], 'normal:SD'),
     (['--vary', 'stroke.frequency=-5,1000'], 'stroke.frequency'),
     (['--vary', 'stroke.frequency=100:5000:100000000'], '--force'),

@@ -66,6 +66,8 @@ def build_plan(args: argparse.Namespace) -> RunPlan:
     if not args.vary and not args.perturb:
         raise SettingsError('give at least one --vary NAME=START:STOP:N (or --perturb for a Monte Carlo)')
     if args.samples is not None:
+        if not args.vary:
+            raise SettingsError('--samples needs at least one --vary NAME=LOW:HIGH (the range to sample)')
         design = Sampled([parse_range(text) for text in args.vary], args.samples, args.seed, args.design)
     else:
         design = Grid([parse_axis(text) for text in args.vary])

@@ -87,7 +87,7 @@ def parse_range(text: str, option: str = '--vary') -> tuple[str, float, float]:
     name, sep, spec = text.partition('=')
     parts = spec.split(':')
     try:
-        low, high = (float(p) for p in parts[:2]) if sep and len(parts) in (2, 3) else (math.nan, math.nan)
+        low, high = (float(p) for p in parts) if sep and len(parts) == 2 else (math.nan, math.nan)
     except ValueError:
         low = high = math.nan
     if not low < high:
