@@ -104,6 +104,12 @@ def test_a_parameter_without_effect_is_reported_and_the_json_is_one_object(recor
     assert (tmp_path / 'calibrate.png').stat().st_size > 10_000
 
 
+def test_a_fit_stopped_early_says_it_did_not_converge(recorded: Path) -> None:
+    result = calibrate([str(recorded)], {'contact.friction_scale': 0.0115}, InProcess(), max_evaluations=1)
+    assert not result.converged
+    assert any(p.startswith('did not converge within 1 evaluations') for p in result.problems), result.problems
+
+
 def test_bad_starts_are_refused(recorded: Path) -> None:
     with pytest.raises(CalibrationError, match='non-zero'):
         calibrate([str(recorded)], {'stroke.delay': 0.0}, InProcess())
