@@ -39,7 +39,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                'micro-feeder sweep --vary stroke.frequency=500:3000:40 --vary stroke.amplitude=20e-6:200e-6:40 '
                '--plot (a map); micro-feeder sweep --vary stroke.frequency=500:3000 --vary '
                'stroke.amplitude=20e-6:200e-6 --samples 200 --seed 1; micro-feeder sweep --vary '
-               'stroke.frequency=500:2000:30 --perturb contact.friction_scale=normal:10%% --replicates 50 '
+               'stroke.frequency=500:2000:30 --perturb contact.friction_scale=normal:10% --replicates 50 '
                '--plot (bands). docs/explore.md has more.')
     add_run_options(parser, 'sweep')
     parser.add_argument('--vary', action='append', default=[], metavar='NAME=START:STOP:N | NAME=V1,V2,...',
