@@ -118,6 +118,7 @@ def describe_runs(job: Job, plan: RunPlan) -> str:
                        ('particle.x0', f'part at x0 = {model.particle.x0 * 1e3:g} mm')):
         if name not in plan.columns:
             parts.append(text)
+    parts += [f'{a.name} = {a.value(0):g}' for a in getattr(plan.design, 'axes', ()) if len(a) == 1]
     end = (f'runs of {job.duration:g} s' if job.duration else
            f'runs end {model.integration.settling_time * 1e3:g} ms after the last stroke')
     return ', '.join(parts) + f'; {end}'

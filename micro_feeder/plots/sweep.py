@@ -74,9 +74,10 @@ def plot_sweep_table(table: Path, plan: RunPlan, path: Path | str, summary: Sequ
     """The figure that suits the plan: a curve (1 parameter), a map (2), Monte Carlo bands or a map of
     the mean (with --perturb). ``setting``: a line saying what the runs share (strokes, part ...).
     Raises ValueError for 3 or more varied parameters."""
-    names = plan.design.names
     setting = textwrap.fill(setting, 80)
-    if summary:
+    points = [plan.design.point(i) for i in range(len(plan.design))]
+    names = tuple(n for j, n in enumerate(plan.design.names) if len({p[j] for p in points}) > 1)  # a lone value:
+    if summary:                                                                               # not an axis
         context = '\n'.join(filter(None, (setting, _context(plan))))
         if len(names) == 1:
             return plot_bands(names[0], summary, path, context)
@@ -93,7 +94,7 @@ def plot_sweep_table(table: Path, plan: RunPlan, path: Path | str, summary: Sequ
         distance = np.where(data['settled'], data['distance_per_stroke_m'], np.nan)
         return plot_map(names, data, distance, regime_index, path, 'Distance per stroke', setting,
                         gridded=plan.design.kind == 'grid')
-    raise ValueError(f'a plot shows 1 or 2 varied parameters, this sweep varies {len(names)}')
+    raise ValueError(f'a plot shows 1 or 2 varied parameters, this sweep varies {len(names) or "none"}')
 
 
 def _context(plan: RunPlan) -> str:
