@@ -18,7 +18,7 @@ import sys
 import tempfile
 import time
 
-from micro_feeder.cli.sweep import sweep
+from micro_feeder.explore.sweep import sweep
 from micro_feeder.physics.dynamics import FeederModel
 
 SPEED_TARGET, SPEED_GOAL, SWEEP_TARGET_S, ACCURACY_TARGET = 200.0, 1000.0, 5.0, 1e-3
@@ -46,7 +46,7 @@ def speed(model: FeederModel) -> float:
 def sweep_time() -> float:
     values = [100.0 + i * (5000.0 - 100.0) / 199 for i in range(200)]
     start = time.perf_counter()
-    rows = sweep({'stroke.count': 5}, 'stroke.frequency', values, processes=2, progress=False)
+    rows = sweep({'stroke.count': 5}, 'stroke.frequency', values, processes=2)
     wall = time.perf_counter() - start
     flights = sum(r['take_off'] > 0 for r in rows)
     print(f'sweep, 200 frequencies x 5 strokes on 2 processes: {wall:.2f} s wall ({flights} runs with a '

@@ -1,4 +1,4 @@
-"""micro-feeder simulate and sweep: options, JSON keys, CSV and PNG outputs, refused values."""
+"""micro-feeder simulate (sweep: test_sweep.py): options, JSON keys, CSV and PNG outputs, refused values."""
 
 import csv
 import json
@@ -28,22 +28,3 @@ def test_simulate_refuses_bad_values(tmp_path, capsys):
     assert 'surface.widths' in capsys.readouterr().err
     assert main(['simulate', '--out', str(tmp_path), '--set', 'stroke.frequency=-5']) == 2
     assert 'stroke.frequency' in capsys.readouterr().err
-
-
-def test_sweep_table(tmp_path, capsys):
-    code = main(['sweep', '--vary', 'stroke.frequency=500,1000,3000', '--set', 'stroke.count=2',
-                 '--processes', '2', '--json', '--out', str(tmp_path), '--plot'])
-    assert code == 0
-    table = json.loads(capsys.readouterr().out)
-    rows = table['rows']
-    assert table['parameter'] == 'stroke.frequency'
-    assert [r['stroke.frequency'] for r in rows] == [500.0, 1000.0, 3000.0]
-    assert rows[0]['distance_m'] == 0.0 and rows[0]['stick_to_slip'] == 0
-    assert rows[1]['distance_per_stroke_m'] == pytest.approx(rows[1]['distance_m'] / 2)
-    assert rows[1]['stick_to_slip'] == 2 and rows[2]['take_off'] >= 1
-    assert (tmp_path / 'sweep.csv').exists() and (tmp_path / 'sweep.png').exists()
-
-
-def test_sweep_refuses_a_list_parameter(capsys):
-    assert main(['sweep', '--vary', 'surface.centers=0:1:3']) == 2
-    assert 'scalar' in capsys.readouterr().err

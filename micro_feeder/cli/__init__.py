@@ -15,8 +15,8 @@ import sys
 from ..physics.parameters import ParameterError
 from ..settings import SettingsError
 
-COMMAND_ORDER = ('run', 'simulate', 'sweep', 'contact', 'hil', 'info', 'plot', 'export', 'recover',
-                 'replay', 'resim')
+COMMAND_ORDER = ('run', 'simulate', 'sweep', 'optimize', 'calibrate', 'contact', 'hil', 'info', 'plot', 'export',
+                 'recover', 'replay', 'resim')
 
 
 class CommandError(Exception):

@@ -1,164 +1,208 @@
-"""``micro-feeder sweep``: distance per stroke vs one parameter, in parallel (seed Fig. 12)."""
+"""``micro-feeder sweep``: distance per stroke over grids, sampled designs and Monte Carlo runs."""
 
 from __future__ import annotations
 
 import argparse
 import csv
 import json
-import multiprocessing
-import os
+import math
 import sys
 import time
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from tqdm import tqdm
 
-from ..physics.dynamics import FeederModel, SimulationError
-from ..settings import SettingsError, known_parameters
+from ..explore.designs import DESIGNS, Grid, RunPlan, Sampled, parse_axis, parse_perturbation, parse_range
+from ..explore.evaluate import RESULT_COLUMNS, Job, model_for
+from ..explore.runners import Runner, RunnerError
+from ..explore.sweep import MAX_RUNS, PointSummary, base_values, estimate_seconds, run_plan, too_big
+from ..physics.parameters import ParameterError
+from ..settings import SettingsError
 from . import CommandError
 from ._common import settings_from_args
-from .simulate import add_run_options, build_model
+from ._explore import add_runner_options, runner_from_args
+from .simulate import add_run_options
 
-# Parameters whose change needs new contact tables; every other sweep reuses the base model's.
-CONTACT_INPUTS = ('contact.', 'particle.mass', 'particle.area', 'gravity')
-COLUMNS = ('distance_m', 'distance_per_stroke_m', 'final_mode', 'stick_to_slip', 'slip_to_stick',
-           'take_off', 'landing', 'max_speed_mps')
+SHOWN_ROWS = 40   # the terminal table shows at most this many rows (the CSV has them all)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
-        'sweep', help='distance per stroke vs one parameter, on all cores (seed Fig. 12)',
-        description='Run the offline simulation for each value of one scalar parameter (in parallel, '
-                    'one process per core) and write the distance per stroke as CSV and, with --plot, '
-                    'as a plot.',
+        'sweep', help='distance per stroke over a grid, a sampled design or a Monte Carlo',
+        description='Run the offline simulation for every point of a design and write one row per run '
+                    '(CSV, or JSON with --json): the varied parameters, the distance per stroke (only for '
+                    'runs whose part settled: a part still in flight has travelled no distance yet), the '
+                    'settled flag, the regime (stuck / slides / flies) and the transition counts. Runs on '
+                    'local processes, or on a Dask cluster with --scheduler.',
         epilog='Examples: micro-feeder sweep --vary stroke.frequency=100:5000:200 --plot; '
-               'micro-feeder sweep --vary stroke.amplitude=20e-6:200e-6:10 --json; '
-               'micro-feeder sweep --vary particle.x0=0.1e-3,0.5e-3,1e-3')
+               'micro-feeder sweep --vary stroke.frequency=500:3000:40 --vary stroke.amplitude=20e-6:200e-6:40 '
+               '--plot (a map); micro-feeder sweep --vary stroke.frequency=500:3000 --vary '
+               'stroke.amplitude=20e-6:200e-6 --samples 200 --seed 1; micro-feeder sweep --vary '
+               'stroke.frequency=500:2000:30 --perturb contact.friction_scale=normal:10% --replicates 50 '
+               '--plot (bands). docs/explore.md has more.')
     add_run_options(parser, 'sweep')
-    parser.add_argument('--vary', required=True, metavar='NAME=START:STOP:N or NAME=V1,V2,...',
-                        help='the parameter to vary: N evenly spaced values from START to STOP, or a list')
-    parser.add_argument('--processes', type=int, default=os.cpu_count() or 1, metavar='N',
-                        help='worker processes (default: all cores)')
+    parser.add_argument('--vary', action='append', default=[], metavar='NAME=START:STOP:N | NAME=V1,V2,...',
+                        help='a parameter to vary; repeat for a full grid (the product of the values). '
+                             'With --samples: NAME=LOW:HIGH, the range to sample')
+    parser.add_argument('--samples', type=int, metavar='N',
+                        help='draw N points in the --vary ranges instead of a grid (see --design, --seed)')
+    parser.add_argument('--design', choices=DESIGNS, default='lhs',
+                        help='with --samples: lhs (Latin hypercube, default) or random')
+    parser.add_argument('--perturb', action='append', default=[], metavar='NAME=DIST:SPREAD',
+                        help='an uncertain parameter, drawn for every run: normal:SD, uniform:HALF_WIDTH '
+                             '(in its unit, or ending in %% of its value) or lognormal:SIGMA; repeatable')
+    parser.add_argument('--replicates', type=int, default=100, metavar='N',
+                        help='with --perturb: Monte Carlo runs per point (default 100)')
+    parser.add_argument('--seed', type=int, default=0, help='seed of --samples and --perturb draws (default 0)')
+    add_runner_options(parser)
+    parser.add_argument('--force', action='store_true',
+                        help=f'run even when the sweep is huge (more than {MAX_RUNS:,} runs or over an hour)')
     parser.set_defaults(func=run)
 
 
-def parse_vary(text: str) -> tuple[str, list[float]]:
-    """``stroke.frequency=100:5000:200`` -> (name, 200 values); ``x=1,2,3`` -> (name, [1, 2, 3])."""
-    name, sep, spec = text.partition('=')
-    name = name.strip()
-    known = known_parameters()
-    if not sep or name not in known:
-        raise SettingsError(f'--vary expects NAME=START:STOP:N or NAME=V1,V2,... with a known parameter '
-                            f'name, got {text!r}')
-    kind = known[name][0].kind
-    if kind not in ('float', 'int'):
-        raise SettingsError(f'--vary {name}: only scalar numeric parameters can be swept ({kind})')
-    try:
-        if ':' in spec:
-            start, stop, count = spec.split(':')
-            values = np.linspace(float(start), float(stop), int(count)).tolist()
-        else:
-            values = [float(v) for v in spec.split(',') if v.strip()]
-    except ValueError as err:
-        raise SettingsError(f'--vary {text!r}: {err}') from err
-    if not values:
-        raise SettingsError(f'--vary {text!r}: no values')
-    if kind == 'int':
-        values = [round(v) for v in values]
-    return name, values
-
-
-_BASE: dict[str, Any] = {}
-
-
-def _start_worker(flat: dict[str, Any], name: str, duration: float | None) -> None:
-    if not _BASE:
-        _BASE.update(model=build_model(flat), flat=flat, name=name, duration=duration)
-
-
-def _run_one(value: float) -> dict[str, Any]:
-    base: FeederModel = _BASE['model']
-    name = _BASE['name']
-    reuse = not name.startswith(CONTACT_INPUTS)
-    model = build_model({**_BASE['flat'], name: value},
-                        contact_model=base.contact_model if reuse else None)
-    state = model.initial_state()
-    model.advance(state, _BASE['duration'] or model.default_duration())
-    counts = state.transitions
-    return {name: value, 'distance_m': state.distance,
-            'distance_per_stroke_m': state.distance / model.stroke.count, 'final_mode': state.mode,
-            **counts, 'max_speed_mps': state.max_speed}
-
-
-def sweep(flat: dict[str, Any], name: str, values: Sequence[float], processes: int = 1,
-          duration: float | None = None, progress: bool = True) -> list[dict[str, Any]]:
-    """One row per value (in order): distances, final mode, transition counts, max speed.
-
-    The base model (and its contact tables) is built once and inherited by the forked workers; the
-    compiled kernel comes from numba's on-disk cache, so a worker starts in well under a second.
-    """
-    _BASE.clear()
-    _start_worker(flat, name, duration)
-    _BASE['model'].run(duration=1e-4)                  # load the compiled kernel before forking
-    bar = tqdm(total=len(values), file=sys.stderr, disable=not progress, unit='run', desc=name)
-    rows = []
-    try:
-        if processes <= 1:
-            for value in values:
-                rows.append(_run_one(value))
-                bar.update()
-        else:
-            methods = multiprocessing.get_all_start_methods()
-            context = multiprocessing.get_context('fork' if 'fork' in methods else None)
-            chunk = max(1, len(values) // (8 * processes))
-            with context.Pool(processes, initializer=_start_worker, initargs=(flat, name, duration)) as pool:
-                for row in pool.imap(_run_one, values, chunksize=chunk):
-                    rows.append(row)
-                    bar.update()
-    finally:
-        bar.close()
-    return rows
+def build_plan(args: argparse.Namespace) -> RunPlan:
+    """The runs the options describe."""
+    if not args.vary and not args.perturb:
+        raise SettingsError('give at least one --vary NAME=START:STOP:N (or --perturb for a Monte Carlo)')
+    if args.samples is not None:
+        if not args.vary:
+            raise SettingsError('--samples needs at least one --vary NAME=LOW:HIGH (the range to sample)')
+        design = Sampled([parse_range(text) for text in args.vary], args.samples, args.seed, args.design)
+    else:
+        design = Grid([parse_axis(text) for text in args.vary])
+    perturbations = tuple(parse_perturbation(text) for text in args.perturb)
+    if perturbations and args.replicates < 1:
+        raise SettingsError(f'--replicates {args.replicates}: at least 1')
+    return RunPlan(design, perturbations, args.replicates if perturbations else 1, args.seed)
 
 
 def run(args: argparse.Namespace) -> int:
     flat = settings_from_args(args)
-    name, values = parse_vary(args.vary)
-    for value in (values[0], values[-1]):             # refuse bad values before starting the workers
-        build_model({**flat, name: value})
-    started = time.perf_counter()
-    try:
-        rows = sweep(flat, name, values, max(1, args.processes), args.duration, progress=True)
-    except SimulationError as err:
-        raise CommandError(str(err)) from err
-    wall = time.perf_counter() - started
+    if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
+        raise CommandError(f'--duration must be a positive number of seconds, got {args.duration}')
+    plan = build_plan(args)
+    job = Job(flat, args.duration)
+    for run_number in (0, len(plan) - 1):           # refuse bad values before starting any worker
+        try:
+            model_for(job, plan.changes(run_number, base_values(job.base, plan.columns)))
+        except ParameterError as err:
+            raise SettingsError(str(err)) from err
     out = Path(args.out)
     try:
         out.mkdir(parents=True, exist_ok=True)
-        csv_path = out / 'sweep.csv'
-        with csv_path.open('w', newline='') as handle:
-            writer = csv.DictWriter(handle, fieldnames=(name, *COLUMNS))
-            writer.writeheader()
-            writer.writerows(rows)
-        plot_path = None
-        if args.plot is not None:
-            from ..plots.dynamics import plot_sweep
-            unit = known_parameters()[name][0].unit
-            plot_path = plot_sweep(name, [r[name] for r in rows], [r['distance_per_stroke_m'] for r in rows],
-                                   [r['take_off'] > 0 for r in rows],
-                                   Path(args.plot) if args.plot else out / 'sweep.png', unit)
     except OSError as err:
         raise CommandError(f'cannot write to {err.filename}: {err.strerror}') from err
+    runner = runner_from_args(args)
+    with runner:
+        estimate = estimate_seconds(job, plan, runner.workers)
+        reason = too_big(len(plan), estimate)
+        if reason and not args.force:
+            raise CommandError(f'{reason} on {runner.where}: reduce the sweep, or add --force')
+        started = time.perf_counter()
+        try:
+            counts, summary = _write_rows(job, plan, runner, out, args.json)
+        except RunnerError as err:
+            raise CommandError(str(err)) from err
+    wall = time.perf_counter() - started
+    return _report(args, plan, out, counts, summary, wall, runner.where, describe_runs(job, plan))
+
+
+def describe_runs(job: Job, plan: RunPlan) -> str:
+    """What the runs share, for plot titles: stroke shape and count, the part's start, the run length."""
+    model = model_for(job, {})
+    s = model.stroke
+    parts = [f'{s.count} {s.waveform} stroke{"s" * (s.count > 1)} per run' if 'stroke.count' not in plan.columns
+             else f'{s.waveform} strokes']
+    for name, text in (('stroke.amplitude', f'{s.amplitude * 1e6:g} µm'), ('stroke.frequency', f'{s.frequency:g} Hz'),
+                       ('particle.x0', f'part at x0 = {model.particle.x0 * 1e3:g} mm')):
+        if name not in plan.columns:
+            parts.append(text)
+    parts += [f'{a.name} = {a.value(0):g}' for a in getattr(plan.design, 'axes', ()) if len(a) == 1]
+    end = (f'runs of {job.duration:g} s' if job.duration else
+           f'runs end {model.integration.settling_time * 1e3:g} ms after the last stroke')
+    return ', '.join(parts) + f'; {end}'
+
+
+def _write_rows(job: Job, plan: RunPlan, runner: Runner, out: Path, as_json: bool
+                ) -> tuple[dict[str, int], PointSummary | None]:
+    """Stream the rows to DIR/sweep.csv (and, with --json, to stdout as they come); count the regimes."""
+    columns = ('run', *(('point',) if plan.replicates > 1 else ()), *plan.columns, *RESULT_COLUMNS)
+    summary = PointSummary(plan) if plan.replicates > 1 else None
+    counts: dict[str, int] = {}
+    bar = tqdm(total=len(plan), file=sys.stderr, unit='run', desc='sweep', smoothing=0.1)
+    try:
+        with (out / 'sweep.csv').open('w', newline='') as handle:
+            writer = csv.DictWriter(handle, fieldnames=columns)
+            writer.writeheader()
+            if as_json:
+                sys.stdout.write(json.dumps({'parameters': list(plan.columns), 'design': plan.design.kind,
+                                             'runs': len(plan)})[:-1] + ', "rows": [')
+            for i, row in enumerate(run_plan(job, plan, runner, progress=bar.update)):
+                writer.writerow(row)
+                counts[row['regime']] = counts.get(row['regime'], 0) + 1
+                counts['unsettled'] = counts.get('unsettled', 0) + (not row['settled'])
+                if summary is not None:
+                    summary.add(row)
+                if as_json:
+                    sys.stdout.write((', ' if i else '') + json.dumps(_json_row(row)))
+    except OSError as err:
+        raise CommandError(f'cannot write to {err.filename}: {err.strerror}') from err
+    finally:
+        bar.close()
+    return counts, summary
+
+
+def _json_row(row: dict[str, Any]) -> dict[str, Any]:
+    """NaN (no distance: the run did not settle) as null, which JSON can carry."""
+    return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in row.items()}
+
+
+def _report(args: argparse.Namespace, plan: RunPlan, out: Path, counts: dict[str, int],
+            summary: PointSummary | None, wall: float, where: str, setting: str) -> int:
+    summary_rows = list(summary.rows()) if summary is not None else []
+    paths = [out / 'sweep.csv']
+    try:
+        if summary_rows:
+            paths.append(out / 'sweep_summary.csv')
+            with paths[-1].open('w', newline='') as handle:
+                writer = csv.DictWriter(handle, fieldnames=list(summary_rows[0]))
+                writer.writeheader()
+                writer.writerows(summary_rows)
+        if args.plot is not None:
+            from ..plots.sweep import plot_sweep_table
+            paths.append(plot_sweep_table(out / 'sweep.csv', plan, Path(args.plot) if args.plot else out / 'sweep.png',
+                                          summary_rows, setting))
+    except OSError as err:
+        raise CommandError(f'cannot write to {err.filename}: {err.strerror}') from err
+    except ValueError as err:
+        raise CommandError(f'--plot: {err}') from err
     if args.json:
-        json.dump({'parameter': name, 'rows': rows, 'wall_time_s': wall}, sys.stdout)
-        print()
+        tail = {'summary': [_json_row(r) for r in summary_rows], 'counts': counts, 'wall_time_s': wall,
+                'where': where}
+        sys.stdout.write('], ' + json.dumps(tail)[1:] + '\n')
         return 0
-    print(f"{name:>22} {'per stroke (um)':>16} {'final mode':>11} {'slips':>6} {'flights':>8}")
-    for row in rows:
-        print(f"{row[name]:>22.6g} {row['distance_per_stroke_m'] * 1e6:>16.6g} {row['final_mode']:>11} "
-              f"{row['stick_to_slip']:>6} {row['take_off']:>8}")
-    print(f'{len(rows)} runs in {wall:.2f} s; table written to {csv_path}'
-          + (f', plot to {plot_path}' if plot_path else ''))
+    if len(plan) <= SHOWN_ROWS and not summary_rows:
+        _print_table(out / 'sweep.csv', plan)
+    for row in summary_rows[:SHOWN_ROWS]:
+        point = ', '.join(f'{k} {row[k]:.6g}' for k in plan.design.names)
+        print(f"{point}: {row['mean_per_stroke_m'] * 1e6:.4g} ± {row['std_per_stroke_m'] * 1e6:.3g} um per stroke, "
+              + ', '.join(f"{r} {row[f'fraction_{r}']:.0%}" for r in ('stuck', 'slides', 'flies'))
+              + f", settled {row['fraction_settled']:.0%}")
+    regimes = ', '.join(f'{k} {v}' for k, v in sorted(counts.items()))
+    print(f'{len(plan)} runs in {wall:.2f} s on {where} ({regimes}); written: {", ".join(map(str, paths))}')
+    if counts.get('unsettled'):
+        print(f"{counts['unsettled']} runs ended before the part came to rest: no distance given for them "
+              '(a longer --duration lets them land)')
     return 0
+
+
+def _print_table(path: Path, plan: RunPlan) -> None:
+    names = plan.columns
+    print(' '.join(f'{n:>20}' for n in names) + f" {'per stroke (um)':>16} {'regime':>7} {'settled':>8}")
+    with path.open() as handle:
+        for row in csv.DictReader(handle):
+            per_stroke = float(row['distance_per_stroke_m']) * 1e6
+            shown = f'{per_stroke:.6g}' if math.isfinite(per_stroke) else f"({row['final_mode']})"
+            print(' '.join(f'{float(row[n]):>20.6g}' for n in names)
+                  + f" {shown:>16} {row['regime']:>7} {row['settled']:>8}")

@@ -3,14 +3,12 @@ the sweep; the panel helpers are shared with the log plot (logs/plot.py)."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
 from pathlib import Path
 
 import matplotlib
 
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt
-import numpy as np
 
 from ..physics.dynamics import MODES, RunResult
 from .units import scale
@@ -111,22 +109,4 @@ def plot_history(result: RunResult, path: Path | str, title: str = '') -> Path:
     for a in axes:
         a.grid(alpha=0.3)
     fig.suptitle(title or 'Part on the actuated surface: strokes, velocity, friction, displacement, mode')
-    return save(fig, path)
-
-
-def plot_sweep(name: str, values: Sequence[float], per_stroke_m: Sequence[float], flew: Sequence[bool],
-               path: Path | str, unit: str = '') -> Path:
-    """Distance per stroke vs the varied parameter; runs in which the part took off are marked."""
-    values = np.asarray(values, dtype=float)
-    per_stroke = np.asarray(per_stroke_m, dtype=float) * UM
-    flew = np.asarray(flew, dtype=bool)
-    fig, ax = plt.subplots(figsize=(8, 4.8))
-    ax.plot(values, per_stroke, '-', color='C0', lw=1)
-    ax.plot(values[~flew], per_stroke[~flew], '.', color='C0', label='in contact throughout')
-    ax.plot(values[flew], per_stroke[flew], 'x', color='C3', label='took off')
-    ax.axhline(0.0, color='k', lw=0.5)
-    ax.set(xlabel=f'{name} ({unit})' if unit else name, ylabel='distance per stroke (um)',
-           title=f'Distance travelled per stroke vs {name} (seed Fig. 12)')
-    ax.grid(alpha=0.3)
-    ax.legend(fontsize=8)
     return save(fig, path)
