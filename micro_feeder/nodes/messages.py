@@ -7,6 +7,7 @@ at the part with x along the surface tangent and z along its normal, tilted by Î
 from __future__ import annotations
 
 import math
+import struct
 from collections.abc import Sequence
 
 import numpy as np
@@ -40,6 +41,15 @@ def to_duration(t: float) -> Duration:
 def seconds(t: Time | Duration) -> float:
     """A ROS Time or Duration in seconds (the inverse of :func:`to_time` / :func:`to_duration`)."""
     return t.sec + t.nanosec * 1e-9
+
+
+def header_stamp(data: bytes) -> float:
+    """``header.stamp`` (s) of a serialized message that starts with a Header (CDR, either byte order), read
+    without deserializing the rest; 0 when the bytes are too short."""
+    if len(data) < 12:
+        return 0.0
+    sec, nanosec = struct.unpack_from('<iI' if data[1] == 1 else '>iI', data, 4)
+    return sec + nanosec * 1e-9
 
 
 def tilt_quaternion(theta: float) -> tuple[float, float, float, float]:
@@ -143,3 +153,36 @@ def trajectory(names: Sequence[str], offsets: np.ndarray, positions: np.ndarray,
                                    time_from_start=to_duration(float(offsets[i])))
               for i in range(len(offsets))]
     return JointTrajectory(header=Header(stamp=stamp), joint_names=list(names), points=points)
+
+
+def trajectory_cdr(names: Sequence[str], offsets_ns: np.ndarray, positions: np.ndarray, velocities: np.ndarray,
+                   accelerations: np.ndarray, stamp: Time) -> bytes:
+    """The serialized (CDR, little endian) JointTrajectory of :func:`trajectory`, with knot offsets in whole
+    nanoseconds, built with numpy: a publisher sends these bytes as they are (``publish(bytes)``). Building
+    thousands of JointTrajectoryPoint objects cost ~14 Âµs per knot; this costs a few per message.
+
+    Layout (XCDR1, alignment counted after the 4-byte encapsulation header): every point after the first
+    starts 4 bytes past an 8-byte boundary, so the points are records of one fixed size. Needs at least one
+    joint when there are points.
+    """
+    n_points, n = np.shape(positions)
+    if n_points and not n:
+        raise ValueError('trajectory_cdr: points need at least one joint')
+    head = bytearray(struct.pack('<iIII', stamp.sec, stamp.nanosec, 1, 0)[:13])    # stamp, frame_id ''
+    head += b'\0' * (-len(head) % 4) + struct.pack('<I', len(names))
+    for name in names:
+        data = name.encode() + b'\0'
+        head += b'\0' * (-len(head) % 4) + struct.pack('<I', len(data)) + data
+    head += b'\0' * (-len(head) % 4) + struct.pack('<I', len(offsets_ns))
+    record = np.zeros(n_points, dtype=np.dtype([
+        ('n_pos', '<u4'), ('pos', '<f8', (n,)), ('n_vel', '<u4'), ('pad_vel', '<u4'), ('vel', '<f8', (n,)),
+        ('n_acc', '<u4'), ('pad_acc', '<u4'), ('acc', '<f8', (n,)), ('n_effort', '<u4'), ('sec', '<i4'),
+        ('nanosec', '<u4')]))
+    record['n_pos'] = record['n_vel'] = record['n_acc'] = n
+    record['pos'], record['vel'], record['acc'] = positions, velocities, accelerations
+    offsets_ns = np.asarray(offsets_ns, dtype=np.int64)
+    record['sec'], record['nanosec'] = np.divmod(offsets_ns, 1_000_000_000)
+    points = record.tobytes()
+    if n_points and len(head) % 8 == 0:      # the first point's doubles need 4 bytes of padding
+        points = points[:4] + b'\0' * 4 + points[4:]
+    return b'\x00\x01\x00\x00' + bytes(head) + points
