@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import tracemalloc
 
+import numpy as np
 import pytest
-from node_helpers import Probe
+from node_helpers import Probe, stamp_s
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
@@ -14,8 +15,9 @@ from std_srvs.srv import Trigger
 
 from micro_feeder.nodes.actuator import Actuator, sample_waveform
 from micro_feeder.nodes.commands import parse_trajectory
-from micro_feeder.physics.trajectory import table_range
-from micro_feeder.physics.waveforms import StrokeParams, trajectory_table
+from micro_feeder.nodes.simulator import Simulator
+from micro_feeder.physics.trajectory import sample_table, table_range
+from micro_feeder.physics.waveforms import StrokeParams, trajectory_table, waveform_table
 
 
 def _peak(msg) -> float:
@@ -86,3 +88,38 @@ def test_long_burst_in_bounded_memory():
     assert times[-1] == pytest.approx(params.burst_end_s(), abs=2e-9)
     assert len(times) >= 1000 * 25
     assert peak < 100e6, f'{peak / 1e6:.0f} MB'  # the grid × bounds matrix took 641 MB
+
+
+def test_endless_burst_streamed_to_a_stepped_simulator_follows_the_waveform(ros_context: Context) -> None:
+    """stroke.count 0: windows stamped ahead of sim time, each taking over at a shared knot; the strokes
+    the simulator publishes at every step equal the analytic waveform to 1e-12 m, until ~/stop."""
+    stroke = {'stroke.frequency': 1234.5, 'stroke.pause': 1e-4}
+    sim = Simulator(context=ros_context, overrides={'start_paused': True, **stroke})
+    actuator, probe, ex = _rig(ros_context, auto_start=False, **stroke, **{'stroke.count': 0, 'stream.lead': 0.004,
+                                                                           'stream.window': 0.0015})
+    ex.add_node(sim)
+    try:
+        probe.step(ex)
+        wait_until(lambda: actuator.sim_time is not None, 10.0, executor=ex, what='sim time at the actuator')
+        assert 'streamed from t = 0.005000000 s' in probe.call(ex, Trigger, 'actuator/start').message
+        joints = probe.msgs['actuator/joint_states']
+        for _ in range(40):
+            probe.step(ex)
+            wait_until(lambda: abs(actuator.sim_time - sim.stepper.t) < 1e-9, 10.0, executor=ex,
+                       what='actuator at sim time')
+            wait_until(lambda: actuator._stream.scheduled_until >= sim.stepper.t + 0.004 - 1e-9, 10.0, executor=ex,
+                       what='windows ahead')
+        params = StrokeParams(count=100, frequency=1234.5, pause=1e-4)
+        t = np.array([stamp_s(m) for m in joints])
+        got = np.array([m.position[0] for m in joints])
+        want = sample_table(waveform_table(params, 1), t - 0.005)[0][:, 0]
+        assert t[-1] == pytest.approx(0.041) and np.ptp(got) > 90e-6
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+        assert actuator.windows >= 40 * 1e-3 / 0.0015 and actuator.underruns == 0
+        assert all(len(m.points) <= 2000 for m in probe.msgs['actuator/trajectory'])
+        probe.call(ex, Trigger, 'actuator/stop')
+        assert actuator._stream is None
+        wait_until(lambda: probe.msgs['actuator/trajectory'][-1].points == [], 10.0, executor=ex, what='stop')
+    finally:
+        ex.shutdown()
+        sim.destroy_node()
