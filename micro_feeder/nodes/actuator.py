@@ -39,7 +39,7 @@ from trajectory_msgs.msg import JointTrajectory
 from ..physics.parameters import ParamSpec
 from ..physics.trajectory import burst_end_ns, max_spacing, table_knots, waveform_knots
 from ..physics.waveforms import StrokeParams, waveform_table
-from . import messages
+from . import messages, trajectory_cdr
 from ._ros import topic_qos
 from .commands import joint_names
 from .parameters import check_changes, declare, model_specs, values
@@ -53,7 +53,7 @@ NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
                                    le=10000), 0),
     'stream.max_points': (ParamSpec('knots per trajectory message at most; a longer burst is streamed in '
                                     'windows', kind='int', ge=16, le=100000), 2000),
-    'stream.window': (ParamSpec('sim time one streamed message covers at most', 's', gt=0, le=10.0), 0.02),
+    'stream.window': (ParamSpec('sim time one streamed message covers at most', 's', gt=0, le=10.0), 0.005),
     'stream.lead': (ParamSpec('a streamed burst is kept scheduled this far ahead of sim time', 's', gt=0, le=10.0),
                     0.05),
 }
@@ -158,7 +158,7 @@ class Actuator(Node):
         if count:
             times, pos, vel, acc = sample_waveform(params, n, self.get_parameter('knots_per_stroke').value)
             if times.size <= self.get_parameter('stream.max_points').value:
-                self._pub.publish(messages.trajectory_cdr(joint_names(n), np.round(times * 1e9), pos, vel, acc,
+                self._pub.publish(trajectory_cdr.encode(joint_names(n), np.round(times * 1e9), pos, vel, acc,
                                                           Time()))
                 return f'burst sent: {times.size} knots on {n} joints, {times[-1]:.6g} s'
         self._pending_stream = True
@@ -197,7 +197,7 @@ class Actuator(Node):
                                       throttle_duration_sec=5.0)
         while not stream.done and stream.scheduled_until < now + lead:
             stamp_ns, offsets_ns, knots = stream.next_window()
-            self._pub.publish(messages.trajectory_cdr(joint_names(stream.n_actuators), offsets_ns, knots[0],
+            self._pub.publish(trajectory_cdr.encode(joint_names(stream.n_actuators), offsets_ns, knots[0],
                                                       knots[1], knots[2], messages.to_time(stamp_ns * 1e-9)))
             self.windows += 1
         if stream.done:

@@ -8,14 +8,16 @@ from __future__ import annotations
 
 import array
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import rclpy.logging
+from rclpy.serialization import deserialize_message
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from ..physics.trajectory import CommandLimits
+from . import trajectory_cdr
 from .messages import seconds
 
 MAX_POINTS = 100_000     # points of one trajectory message: longer strokes go in windows
@@ -97,16 +99,51 @@ def parse_trajectory(msg: JointTrajectory, joints: Sequence[str], limits: tuple[
     What the interpolation does between knots is checked when the trajectory is applied
     (:meth:`~micro_feeder.nodes.stepper.Stepper.command_trajectory`).
     """
-    stamp = seconds(msg.header.stamp)
+    points = msg.points
+
+    def knots(order: list[int]) -> tuple[np.ndarray, ...]:
+        sec = np.fromiter((p.time_from_start.sec for p in points), dtype=np.int64, count=len(points))
+        nanosec = np.fromiter((p.time_from_start.nanosec for p in points), dtype=np.int64, count=len(points))
+        return (sec + nanosec * 1e-9, _field(points, 'positions', order, True),
+                _field(points, 'velocities', order, False), _field(points, 'accelerations', order, False))
+
+    return _checked(seconds(msg.header.stamp), list(msg.joint_names), len(points), knots, joints, limits)
+
+
+def parse_trajectory_cdr(data: bytes, joints: Sequence[str], limits: tuple[float, float]) -> TrajectoryCommand:
+    """:func:`parse_trajectory` of a serialized JointTrajectory, reading the knots of the usual layout
+    (positions, velocities and accelerations on every point, as the actuator sends) with numpy instead of
+    deserializing one Python object per point; any other layout is deserialized by rclpy. A message of
+    more than :data:`MAX_POINTS` points is refused without reading them. Raises :class:`CommandRejected`
+    (also for bytes that are not a JointTrajectory)."""
+    decoded = trajectory_cdr.decode(data, MAX_POINTS)
+    if decoded is None or (decoded.records is None and 0 < decoded.n_points <= MAX_POINTS):
+        try:
+            msg = deserialize_message(data, JointTrajectory)
+        except Exception as err:  # rclpy raises several types for malformed bytes
+            raise CommandRejected(f'trajectory: cannot deserialize: {err}') from err
+        return parse_trajectory(msg, joints, limits)
+    records = decoded.records
+
+    def knots(order: list[int]) -> tuple[np.ndarray, ...]:
+        offsets = records['sec'].astype(np.int64) + records['nanosec'] * 1e-9
+        return offsets, records['pos'][:, order], records['vel'][:, order], records['acc'][:, order]
+
+    return _checked(decoded.stamp, decoded.names, decoded.n_points, knots, joints, limits)
+
+
+def _checked(stamp: float, names: list[str], n_points: int, knots: Callable[[list[int]], tuple[np.ndarray, ...]],
+             joints: Sequence[str], limits: tuple[float, float]) -> TrajectoryCommand:
+    """The checks of :func:`parse_trajectory`; ``knots(order)`` reads (offsets, positions, velocities or
+    None, accelerations or None) with columns in the simulator's joint ``order``, only once the cheap
+    checks have passed."""
     if stamp < 0:
         raise CommandRejected(f'trajectory: negative header.stamp {stamp:g} s')
-    points = msg.points
-    if not points:
+    if not n_points:
         return TrajectoryCommand(stamp, np.zeros(0), np.zeros((0, len(joints))), None, None)
-    if len(points) > MAX_POINTS:
-        raise CommandRejected(f'trajectory: {len(points)} points, more than {MAX_POINTS}: send long strokes '
+    if n_points > MAX_POINTS:
+        raise CommandRejected(f'trajectory: {n_points} points, more than {MAX_POINTS}: send long strokes '
                               'in windows (each replaces the schedule from its start on), as the actuator does')
-    names = list(msg.joint_names)
     unknown = [n for n in names if n not in joints]
     if unknown:
         raise CommandRejected(f'trajectory: unknown joint names {unknown} (known: {list(joints)})')
@@ -115,17 +152,11 @@ def parse_trajectory(msg: JointTrajectory, joints: Sequence[str], limits: tuple[
     missing = [n for n in joints if n not in names]
     if missing:
         raise CommandRejected(f'trajectory: joints {missing} missing (every joint must be commanded)')
-    order = [names.index(n) for n in joints]
-    sec = np.fromiter((p.time_from_start.sec for p in points), dtype=np.int64, count=len(points))
-    nanosec = np.fromiter((p.time_from_start.nanosec for p in points), dtype=np.int64, count=len(points))
-    offsets = sec + nanosec * 1e-9
+    offsets, positions, velocities, accelerations = knots([names.index(n) for n in joints])
     if offsets[0] < 0 or np.any(np.diff(offsets) <= 0):
         bad = int(np.argmax(offsets < 0)) if offsets[0] < 0 else int(np.argmax(np.diff(offsets) <= 0)) + 1
         raise CommandRejected(f'trajectory: time_from_start must be >= 0 and strictly increasing, got '
                               f'{offsets[max(bad - 1, 0)]:.9f} s then {offsets[bad]:.9f} s at point {bad}')
-    positions = _field(points, 'positions', order, True)
-    velocities = _field(points, 'velocities', order, False)
-    accelerations = _field(points, 'accelerations', order, False)
     if accelerations is not None and velocities is None:
         raise CommandRejected('trajectory: accelerations given without velocities')
     bounds = CommandLimits(*limits)

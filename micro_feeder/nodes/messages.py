@@ -154,35 +154,3 @@ def trajectory(names: Sequence[str], offsets: np.ndarray, positions: np.ndarray,
               for i in range(len(offsets))]
     return JointTrajectory(header=Header(stamp=stamp), joint_names=list(names), points=points)
 
-
-def trajectory_cdr(names: Sequence[str], offsets_ns: np.ndarray, positions: np.ndarray, velocities: np.ndarray,
-                   accelerations: np.ndarray, stamp: Time) -> bytes:
-    """The serialized (CDR, little endian) JointTrajectory of :func:`trajectory`, with knot offsets in whole
-    nanoseconds, built with numpy: a publisher sends these bytes as they are (``publish(bytes)``). Building
-    thousands of JointTrajectoryPoint objects cost ~14 µs per knot; this costs a few per message.
-
-    Layout (XCDR1, alignment counted after the 4-byte encapsulation header): every point after the first
-    starts 4 bytes past an 8-byte boundary, so the points are records of one fixed size. Needs at least one
-    joint when there are points.
-    """
-    n_points, n = np.shape(positions)
-    if n_points and not n:
-        raise ValueError('trajectory_cdr: points need at least one joint')
-    head = bytearray(struct.pack('<iIII', stamp.sec, stamp.nanosec, 1, 0)[:13])    # stamp, frame_id ''
-    head += b'\0' * (-len(head) % 4) + struct.pack('<I', len(names))
-    for name in names:
-        data = name.encode() + b'\0'
-        head += b'\0' * (-len(head) % 4) + struct.pack('<I', len(data)) + data
-    head += b'\0' * (-len(head) % 4) + struct.pack('<I', len(offsets_ns))
-    record = np.zeros(n_points, dtype=np.dtype([
-        ('n_pos', '<u4'), ('pos', '<f8', (n,)), ('n_vel', '<u4'), ('pad_vel', '<u4'), ('vel', '<f8', (n,)),
-        ('n_acc', '<u4'), ('pad_acc', '<u4'), ('acc', '<f8', (n,)), ('n_effort', '<u4'), ('sec', '<i4'),
-        ('nanosec', '<u4')]))
-    record['n_pos'] = record['n_vel'] = record['n_acc'] = n
-    record['pos'], record['vel'], record['acc'] = positions, velocities, accelerations
-    offsets_ns = np.asarray(offsets_ns, dtype=np.int64)
-    record['sec'], record['nanosec'] = np.divmod(offsets_ns, 1_000_000_000)
-    points = record.tobytes()
-    if n_points and len(head) % 8 == 0:      # the first point's doubles need 4 bytes of padding
-        points = points[:4] + b'\0' * 4 + points[4:]
-    return b'\x00\x01\x00\x00' + bytes(head) + points
