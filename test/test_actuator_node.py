@@ -6,7 +6,7 @@ import tracemalloc
 
 import numpy as np
 import pytest
-from node_helpers import Probe
+from node_helpers import Probe, stamp_s
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
@@ -14,7 +14,17 @@ from ros_helpers import wait_until
 from std_srvs.srv import Trigger
 
 from micro_feeder.nodes.actuator import Actuator, sample_waveform
-from micro_feeder.physics.waveforms import StrokeParams, waveform_table
+from micro_feeder.nodes.commands import parse_trajectory
+from micro_feeder.nodes.simulator import Simulator
+from micro_feeder.physics.trajectory import sample_table, table_range
+from micro_feeder.physics.waveforms import StrokeParams, trajectory_table, waveform_table
+
+
+def _peak(msg) -> float:
+    """Highest interpolated stroke of joint 0 (between knots too)."""
+    cmd = parse_trajectory(msg, msg.joint_names, (-1.0, 1.0))
+    table = trajectory_table(cmd.offsets, cmd.positions, cmd.velocities, cmd.accelerations)
+    return float(table_range(table)[1][0])
 
 
 def _rig(context: Context, **params: object) -> tuple[Actuator, Probe, SingleThreadedExecutor]:
@@ -40,7 +50,7 @@ def test_start_and_stop(ros_context: Context) -> None:
         assert len(point.positions) == len(point.velocities) == len(point.accelerations) == 2
         end = burst.points[-1].time_from_start
         assert end.sec + end.nanosec * 1e-9 == pytest.approx(3.25e-3)
-        assert max(p.positions[0] for p in burst.points) == pytest.approx(100e-6, rel=1e-3)
+        assert _peak(burst) == pytest.approx(100e-6, rel=1e-9)
         assert probe.call(ex, Trigger, 'actuator/stop').success
         wait_until(lambda: len(trajectories) == 2, 10.0, executor=ex, what='stop')
         assert trajectories[-1].points == [] and trajectories[-1].joint_names == ['piezo_0', 'piezo_1']
@@ -51,7 +61,7 @@ def test_start_and_stop(ros_context: Context) -> None:
         assert result.successful
         probe.call(ex, Trigger, 'actuator/start')
         wait_until(lambda: len(trajectories) == 3, 10.0, executor=ex, what='second burst')
-        assert max(p.positions[0] for p in trajectories[-1].points) == pytest.approx(50e-6, rel=1e-3)
+        assert _peak(trajectories[-1]) == pytest.approx(50e-6, rel=1e-9)
         assert actuator.bursts == 2 and actuator.stops == 1
     finally:
         ex.shutdown()
@@ -67,41 +77,6 @@ def test_auto_start_sends_once_when_a_subscriber_appears(ros_context: Context) -
         ex.shutdown()
 
 
-def _reference_sample_waveform(params, n_actuators, knots_per_stroke):
-    """sample_waveform as it was with the grid × bounds distance matrix (the knots must not change)."""
-    table = waveform_table(params, n_actuators)
-    end = params.burst_end_s()
-    grid = np.linspace(0.0, end, int(np.ceil(end * params.frequency * knots_per_stroke)) + 1)
-    bounds = [table.start[k] + j * table.period[k] + table.seg_start[k, :table.n_seg[k] + 1]
-              for k in range(n_actuators) for j in range(int(table.count[k]))]
-    bounds = np.unique(np.concatenate(bounds))
-    bounds = bounds[np.concatenate([[True], np.diff(bounds) > 1e-12])]
-    near = np.min(np.abs(grid[:, None] - bounds[None, :]), axis=1) <= 1e-12
-    times = np.sort(np.concatenate([grid[~near], bounds]))
-    times = times[(times >= 0.0) & (times <= end * (1 + 1e-12))]
-    values = np.stack([table.evaluate(float(t)) for t in times])
-    on_boundary = np.isin(times, bounds)
-    keep = on_boundary | np.any(values != 0.0, axis=(1, 2)) | (times == times[0]) | (times == times[-1])
-    times, values = times[keep], values[keep]
-    return times, values[:, 0, :], values[:, 1, :], values[:, 2, :]
-
-
-@pytest.mark.parametrize(('stroke', 'n', 'knots'), [
-    ({}, 1, 40),
-    ({'count': 5, 'pause': 3e-4, 'delay': 1e-4}, 1, 40),
-    ({'waveform': 'trapezoid', 'count': 3, 'phases': (0.0, 0.25, 0.5)}, 3, 16),
-    ({'waveform': 'asymmetric', 'duty': 0.3, 'count': 4, 'pause': 1e-3, 'phases': (0.0, 0.5)}, 2, 40),
-    ({'waveform': 'samples', 'count': 7, 'frequency': 1700.0}, 1, 25),
-    ({'waveform': 'half_sine', 'count': 10, 'pause': 2.5e-4, 'phases': (0.0, 1.0)}, 2, 8),
-])
-def test_sample_waveform_knots_unchanged(stroke, n, knots):
-    params = StrokeParams(**stroke)
-    got = sample_waveform(params, n, knots)
-    want = _reference_sample_waveform(params, n, knots)
-    for g, w in zip(got, want, strict=True):
-        np.testing.assert_array_equal(g, w)
-
-
 def test_long_burst_in_bounded_memory():
     params = StrokeParams(count=1000, pause=1e-4)
     tracemalloc.start()
@@ -110,6 +85,41 @@ def test_long_burst_in_bounded_memory():
         _, peak = tracemalloc.get_traced_memory()
     finally:
         tracemalloc.stop()
-    assert times[-1] == pytest.approx(params.burst_end_s())
-    assert len(times) >= 1000 * 40
+    assert times[-1] == pytest.approx(params.burst_end_s(), abs=2e-9)
+    assert len(times) >= 1000 * 25
     assert peak < 100e6, f'{peak / 1e6:.0f} MB'  # the grid × bounds matrix took 641 MB
+
+
+def test_endless_burst_streamed_to_a_stepped_simulator_follows_the_waveform(ros_context: Context) -> None:
+    """stroke.count 0: windows stamped ahead of sim time, each taking over at a shared knot; the strokes
+    the simulator publishes at every step equal the analytic waveform to 1e-12 m, until ~/stop."""
+    stroke = {'stroke.frequency': 1234.5, 'stroke.pause': 1e-4}
+    sim = Simulator(context=ros_context, overrides={'start_paused': True, **stroke})
+    actuator, probe, ex = _rig(ros_context, auto_start=False, **stroke, **{'stroke.count': 0, 'stream.lead': 0.004,
+                                                                           'stream.window': 0.0015})
+    ex.add_node(sim)
+    try:
+        probe.step(ex)
+        wait_until(lambda: actuator.sim_time is not None, 10.0, executor=ex, what='sim time at the actuator')
+        assert 'streamed from t = 0.005000000 s' in probe.call(ex, Trigger, 'actuator/start').message
+        joints = probe.msgs['actuator/joint_states']
+        for _ in range(40):
+            probe.step(ex)
+            wait_until(lambda: abs(actuator.sim_time - sim.stepper.t) < 1e-9, 10.0, executor=ex,
+                       what='actuator at sim time')
+            wait_until(lambda: actuator._stream.scheduled_until >= sim.stepper.t + 0.004 - 1e-9, 10.0, executor=ex,
+                       what='windows ahead')
+        params = StrokeParams(count=100, frequency=1234.5, pause=1e-4)
+        t = np.array([stamp_s(m) for m in joints])
+        got = np.array([m.position[0] for m in joints])
+        want = sample_table(waveform_table(params, 1), t - 0.005)[0][:, 0]
+        assert t[-1] == pytest.approx(0.041) and np.ptp(got) > 90e-6
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+        assert actuator.windows >= 40 * 1e-3 / 0.0015 and actuator.underruns == 0
+        assert all(len(m.points) <= 2000 for m in probe.msgs['actuator/trajectory'])
+        probe.call(ex, Trigger, 'actuator/stop')
+        assert actuator._stream is None
+        wait_until(lambda: probe.msgs['actuator/trajectory'][-1].points == [], 10.0, executor=ex, what='stop')
+    finally:
+        ex.shutdown()
+        sim.destroy_node()

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import array
 import math
+import tracemalloc
 
 import numpy as np
 import pytest
@@ -14,7 +16,9 @@ from micro_feeder.nodes.actuator import sample_waveform
 from micro_feeder.nodes.commands import CommandRejected, parse_setpoints, parse_trajectory, start_time
 from micro_feeder.nodes.messages import tilt_quaternion, to_time
 from micro_feeder.nodes.parameters import descriptor, model_specs
+from micro_feeder.nodes.stepper import Stepper, build_model
 from micro_feeder.physics.waveforms import StrokeParams, waveform_table
+from micro_feeder.settings import load_settings
 
 LIMITS = (-200e-6, 200e-6)
 
@@ -103,7 +107,29 @@ def test_waveform_knots_follow_the_waveform(waveform: str) -> None:
     params = StrokeParams(waveform=waveform, count=2, pause=2e-4, phases=(0.0, 0.5))
     times, pos, _, acc = sample_waveform(params, 2, 40)
     assert np.all(np.diff(times) > 0) and times[0] == 0.0
-    assert times[-1] == pytest.approx(params.burst_end_s())
+    assert np.all(np.diff(times) <= 1 / 40e3 + 1e-12)
+    assert times[-1] == pytest.approx(params.burst_end_s(), abs=2e-9)
     exact = np.stack([waveform_table(params, 2).evaluate(float(t)) for t in times])
-    assert np.array_equal(exact[:, 0], pos) and np.array_equal(exact[:, 2], acc)
+    np.testing.assert_allclose(pos, exact[:, 0], rtol=1e-12, atol=1e-18)
+    np.testing.assert_allclose(acc, exact[:, 2], rtol=1e-12, atol=1e-9)
     assert np.all(pos[-1] == 0.0) and np.all(acc[-1] == 0.0)
+
+
+def test_setpoints_streamed_at_1khz_keep_the_schedule_bounded() -> None:
+    """A controller streaming actuator/command at 1 kHz: 3000 set-points, the schedule keeps a few pieces
+    and memory does not grow with the count."""
+    stepper = Stepper(build_model(load_settings()))
+    tracemalloc.start()
+    try:
+        for i in range(3000):
+            data = array.array('d', [50e-6 * math.sin(i * 0.01)])     # Float64MultiArray.data's type
+            stepper.command_setpoints(parse_setpoints(data, 1, LIMITS))
+            stepper.advance((i + 1) * 1e-3)
+            if i == 999:
+                after_1000, _ = tracemalloc.get_traced_memory()
+        current, _ = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert len(stepper.schedule.pieces) <= 9
+    assert current - after_1000 < 200_000, f'{(current - after_1000) / 1e3:.0f} kB over 2000 set-points'
+    assert stepper.observe().strokes[0] == pytest.approx(50e-6 * math.sin(2999 * 0.01))

@@ -1,15 +1,26 @@
-"""The ``actuator`` node: publishes the stroke waveform of the ``stroke.*`` parameters as a JointTrajectory.
+"""The ``actuator`` node: publishes the stroke waveform of the ``stroke.*`` parameters as JointTrajectory.
 
-``actuator/start`` sends the configured burst on ``actuator/trajectory`` (knots with positions,
-velocities and accelerations sampled from the analytic waveform); ``actuator/stop`` sends an empty
-trajectory, which stops the strokes where they are. With ``auto_start`` the burst is sent once, as soon
-as a subscriber (the simulator) is connected. ``stroke.*`` may be changed at any time and apply to the
-next ``start``. The header stamp is 0 ("start on receipt"): the burst's own ``stroke.delay`` is in the
-knot times.
+``~/start`` sends the configured burst on ``actuator/trajectory``: knots with positions, velocities and
+accelerations of the analytic waveform, placed so that the quintic interpolation the simulator (and
+joint_trajectory_controller) runs through them reproduces the schedule within 1e-13 m at every instant
+(:mod:`micro_feeder.physics.trajectory`). ``~/stop`` stops: the stream ends and an empty trajectory
+holds the strokes where they are. With ``auto_start`` the burst is sent once, as soon as a subscriber
+(the simulator) is connected. ``stroke.*`` may be changed at any time and apply to the next start.
+
+A burst that fits in one message of ``stream.max_points`` knots goes out whole, stamped 0 ("start on
+receipt"; ``stroke.delay`` is in the knot times): it needs nothing from the simulator, so it works in
+lockstep too. A longer burst, or ``stroke.count`` 0 (strokes until ``~/stop``), is **streamed**: the node
+follows sim time on ``actuator/joint_states`` and keeps ``stream.lead`` seconds of the waveform
+scheduled ahead of it, in windows of at most ``stream.window`` s and ``stream.max_points`` knots, each
+stamped at its start in sim time (replace-from-start semantics: a window takes over exactly where the
+previous one is, at a knot both share). Message size, memory and work per window are bounded whatever the
+burst's length.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -19,13 +30,16 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from ..physics.parameters import ParamSpec
+from ..physics.trajectory import burst_end_ns, max_spacing, table_knots, waveform_knots
 from ..physics.waveforms import StrokeParams, waveform_table
-from . import messages
+from . import messages, trajectory_cdr
 from ._ros import topic_qos
 from .commands import joint_names
 from .parameters import check_changes, declare, model_specs, values
@@ -34,41 +48,70 @@ from .spin import spin_node
 NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
     'auto_start': (ParamSpec('send the burst once when a subscriber is connected', kind='bool', read_only=True),
                    True),
-    'knots_per_stroke': (ParamSpec('trajectory knots per stroke period (besides the waveform breakpoints)',
-                                   kind='int', ge=2, le=10000), 40),
+    'knots_per_stroke': (ParamSpec('minimum trajectory knots per stroke period (0: none); the waveform gets '
+                                   'more where it needs them to be followed within 1e-13 m', kind='int', ge=0,
+                                   le=10000), 0),
+    'stream.max_points': (ParamSpec('knots per trajectory message at most; a longer burst is streamed in '
+                                    'windows', kind='int', ge=16, le=100000), 2000),
+    'stream.window': (ParamSpec('sim time one streamed message covers at most', 's', gt=0, le=10.0), 0.005),
+    'stream.lead': (ParamSpec('a streamed burst is kept scheduled this far ahead of sim time', 's', gt=0, le=10.0),
+                    0.05),
 }
+COUNT_SPEC = ParamSpec('number of strokes in the burst; 0 = strokes until ~/stop (streamed)', kind='int', ge=0)
 
 
-def sample_waveform(params: StrokeParams, n_actuators: int, knots_per_stroke: int
+def sample_waveform(params: StrokeParams, n_actuators: int, knots_per_stroke: int = 0
                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Knots of the burst: times (s from the start) and (n, actuators) s (m), ṡ (m/s), s̈ (m/s²).
+    """Knots of the whole burst: times (s from its start, whole ns) and (n, actuators) s (m), ṡ (m/s),
+    s̈ (m/s²), at least ``knots_per_stroke`` per stroke period (see :func:`waveform_knots`)."""
+    return waveform_knots(params, n_actuators, min_knots_per_stroke=knots_per_stroke)
 
-    Knots lie on a uniform grid of ``knots_per_stroke`` per stroke period plus every segment boundary of
-    every actuator (where s̈ may jump; the value there is the right-hand one), from 0 to the end of the
-    burst, so a quintic Hermite through them follows the waveform closely. Grid knots where every actuator
-    rests (s = ṡ = s̈ = 0, e.g. in the pauses between strokes) are left out: the boundary knots around a rest
-    are kept, and a quintic between two resting knots is exactly zero.
+
+class StrokeStream:
+    """The windows of a streamed burst (pure: no ROS). Times in integer nanoseconds of sim time.
+
+    ``origin_ns``: sim time at which the burst's time 0 falls; :meth:`next_window` returns the knots of the
+    next window, starting where the previous one ended. ``count`` 0 = endless.
     """
-    table = waveform_table(params, n_actuators)
-    end = params.burst_end_s()
-    grid = np.linspace(0.0, end, int(np.ceil(end * params.frequency * knots_per_stroke)) + 1)
-    bounds = [table.start[k] + j * table.period[k] + table.seg_start[k, :table.n_seg[k] + 1]
-              for k in range(n_actuators) for j in range(int(table.count[k]))]
-    bounds = np.unique(np.concatenate(bounds))          # computed as the kernel computes them: exact
-    bounds = bounds[np.concatenate([[True], np.diff(bounds) > 1e-12])]
-    # Distance from each grid time to its nearest bound (bounds are sorted): the bound at or after it
-    # and the one before; O((grid + bounds) log bounds) instead of a grid × bounds matrix.
-    right = np.searchsorted(bounds, grid)
-    after = np.abs(grid - bounds[np.minimum(right, len(bounds) - 1)])
-    before = np.abs(grid - bounds[np.maximum(right - 1, 0)])
-    near = np.minimum(after, before) <= 1e-12
-    times = np.sort(np.concatenate([grid[~near], bounds]))
-    times = times[(times >= 0.0) & (times <= end * (1 + 1e-12))]
-    values = np.stack([table.evaluate(float(t)) for t in times])       # (n, 3, actuators)
-    on_boundary = np.isin(times, bounds)
-    keep = on_boundary | np.any(values != 0.0, axis=(1, 2)) | (times == times[0]) | (times == times[-1])
-    times, values = times[keep], values[keep]
-    return times, values[:, 0, :], values[:, 1, :], values[:, 2, :]
+
+    def __init__(self, params: StrokeParams, count: int, n_actuators: int, origin_ns: int, *,
+                 window: float, max_points: int, knots_per_stroke: int):
+        self.params, self.count, self.n_actuators = params, count, n_actuators
+        self.origin_ns = origin_ns
+        self.sent_ns = 0                                   # burst time up to which knots were sent
+        self.end_ns = burst_end_ns(dataclasses.replace(params, count=count)) if count else None
+        self._window_ns = max(round(window * 1e9), 1)
+        self._max_points = max_points
+        self._max_spacing = max_spacing(params, knots_per_stroke)
+
+    @property
+    def done(self) -> bool:
+        return self.end_ns is not None and self.sent_ns >= self.end_ns
+
+    @property
+    def scheduled_until(self) -> float:
+        """Sim time (s) up to which the strokes are scheduled."""
+        return (self.origin_ns + self.sent_ns) * 1e-9
+
+    def next_window(self) -> tuple[int, np.ndarray, np.ndarray]:
+        """(stamp in ns of sim time, knot offsets from the stamp in ns, (3, n, actuators) s, ṡ, s̈)."""
+        start = self.sent_ns
+        stop = start + self._window_ns if self.end_ns is None else min(start + self._window_ns, self.end_ns)
+        table = waveform_table(self._strokes_through(stop), self.n_actuators)
+        ns, values = table_knots(table, start * 1e-9, stop * 1e-9, max_spacing=self._max_spacing)
+        if ns.size > self._max_points:
+            ns, values = ns[:self._max_points], values[:, :self._max_points]
+        self.sent_ns = int(ns[-1])
+        return self.origin_ns + start, ns - start, values
+
+    def _strokes_through(self, stop_ns: int) -> StrokeParams:
+        """The burst's parameters with enough strokes to cover burst time ``stop_ns`` (endless: a count
+        that grows with time, so a table stays a few strokes long relative to the window)."""
+        if self.count:
+            return dataclasses.replace(self.params, count=self.count)
+        p = self.params
+        needed = math.floor((stop_ns * 1e-9 - p.delay) / p.period_s) + 2 + math.ceil(max(p.phases))
+        return dataclasses.replace(p, count=max(needed, 1))
 
 
 class Actuator(Node):
@@ -77,39 +120,97 @@ class Actuator(Node):
     def __init__(self, overrides: Mapping[str, Any] | None = None, **kwargs: Any):
         super().__init__('actuator', **kwargs)
         self._stroke_specs = model_specs([StrokeParams])
+        self._stroke_specs['stroke.count'] = (COUNT_SPEC, self._stroke_specs['stroke.count'][1])
         self._specs = {**self._stroke_specs, **NODE_SPECS}
         declare(self, self._specs, overrides)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._pub = self.create_publisher(JointTrajectory, 'actuator/trajectory', topic_qos('actuator/trajectory'))
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', topic_qos('/diagnostics'))
-        self.create_service(Trigger, 'actuator/start', self._on_start)
-        self.create_service(Trigger, 'actuator/stop', self._on_stop)
+        self.create_subscription(JointState, 'actuator/joint_states', self._on_sim_time,
+                                 QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT), raw=True)
+        self.create_service(Trigger, '~/start', self._on_start)
+        self.create_service(Trigger, '~/stop', self._on_stop)
         self.bursts = 0
         self.stops = 0
+        self.windows = 0
+        self.underruns = 0
+        self.sim_time: float | None = None           # latest sim time seen on actuator/joint_states (s)
+        self._stream: StrokeStream | None = None
+        self._pending_stream = False                 # streamed start waiting for the first sim time
         self._auto = self.create_timer(0.05, self._auto_start) if self.get_parameter('auto_start').value else None
         self.create_timer(1.0, self._publish_diagnostics)
 
-    def trajectory(self) -> JointTrajectory:
-        """The burst of the current ``stroke.*`` parameters as a JointTrajectory (stamp 0)."""
-        params = StrokeParams.from_flat(values(self, self._stroke_specs))
-        n = len(params.phases)
-        knots = self.get_parameter('knots_per_stroke').value
-        return messages.trajectory(joint_names(n), *sample_waveform(params, n, knots), Time())
+    # -- the burst ------------------------------------------------------------------------------------
+
+    def _stroke_params(self) -> tuple[StrokeParams, int]:
+        """(the stroke parameters with a count of at least 1, the configured count: 0 = endless)."""
+        flat = values(self, self._stroke_specs)
+        count = flat['stroke.count']
+        return StrokeParams.from_flat({**flat, 'stroke.count': max(count, 1)}), count
 
     def start(self) -> str:
-        """Publish the burst; returns a one-line description."""
-        msg = self.trajectory()
-        self._pub.publish(msg)
+        """Send the burst: whole when it is finite and fits in ``stream.max_points`` knots, else start
+        streaming it. Returns a one-line description."""
+        self._stream = None
         self.bursts += 1
-        length = messages.seconds(msg.points[-1].time_from_start)
-        return f'burst sent: {len(msg.points)} knots on {len(msg.joint_names)} joints, {length:.6g} s'
+        params, count = self._stroke_params()
+        n = len(params.phases)
+        if count:
+            times, pos, vel, acc = sample_waveform(params, n, self.get_parameter('knots_per_stroke').value)
+            if times.size <= self.get_parameter('stream.max_points').value:
+                self._pub.publish(trajectory_cdr.encode(joint_names(n), np.round(times * 1e9), pos, vel, acc,
+                                                          Time()))
+                return f'burst sent: {times.size} knots on {n} joints, {times[-1]:.6g} s'
+        self._pending_stream = True
+        if self.sim_time is None:
+            return 'burst streamed from the first sim time seen on actuator/joint_states'
+        self._start_stream(self.sim_time)
+        return f'burst streamed from t = {self._stream.origin_ns * 1e-9:.9f} s (sim time)'
 
     def stop(self) -> str:
-        """Publish an empty trajectory (stop: hold the strokes where they are)."""
+        """End any stream and publish an empty trajectory (stop: hold the strokes where they are)."""
+        self._stream = None
+        self._pending_stream = False
         n = len(self.get_parameter('stroke.phases').value)
         self._pub.publish(JointTrajectory(joint_names=joint_names(n)))
         self.stops += 1
         return 'stop sent'
+
+    def _start_stream(self, now: float) -> None:
+        params, count = self._stroke_params()
+        lead = self.get_parameter('stream.lead').value
+        self._pending_stream = False
+        self._stream = StrokeStream(params, count, len(params.phases), round((now + lead) * 1e9),
+                                    window=self.get_parameter('stream.window').value,
+                                    max_points=self.get_parameter('stream.max_points').value,
+                                    knots_per_stroke=self.get_parameter('knots_per_stroke').value)
+        self._feed(now)
+
+    def _feed(self, now: float) -> None:
+        """Send windows until ``stream.lead`` of strokes is scheduled ahead of sim time ``now``."""
+        stream = self._stream
+        lead = self.get_parameter('stream.lead').value
+        if stream.scheduled_until < now and stream.sent_ns > 0:
+            self.underruns += 1
+            self.get_logger().warning(f'stream underrun: sim time {now:.6f} s passed the strokes scheduled '
+                                      f'(until {stream.scheduled_until:.6f} s); raise stream.lead',
+                                      throttle_duration_sec=5.0)
+        while not stream.done and stream.scheduled_until < now + lead:
+            stamp_ns, offsets_ns, knots = stream.next_window()
+            self._pub.publish(trajectory_cdr.encode(joint_names(stream.n_actuators), offsets_ns, knots[0],
+                                                      knots[1], knots[2], messages.to_time(stamp_ns * 1e-9)))
+            self.windows += 1
+        if stream.done:
+            self._stream = None
+
+    def _on_sim_time(self, data: bytes) -> None:
+        self.sim_time = messages.header_stamp(data)
+        if self._pending_stream:
+            self._start_stream(self.sim_time)
+        elif self._stream is not None:
+            self._feed(self.sim_time)
+
+    # -- ROS callbacks --------------------------------------------------------------------------------
 
     def _auto_start(self) -> None:
         if self._pub.get_subscription_count() > 0:
@@ -126,15 +227,22 @@ class Actuator(Node):
         return response
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
-        reason = check_changes(self._specs, values(self, self._stroke_specs), params, [StrokeParams])
+        # stroke.count 0 (endless) is the actuator's own: the stroke group is checked with one stroke
+        checked = [Parameter('stroke.count', value=1) if p.name == 'stroke.count' and p.value == 0 else p
+                   for p in params]
+        current = values(self, self._stroke_specs)
+        current['stroke.count'] = max(current['stroke.count'], 1)
+        reason = check_changes(self._specs, current, checked, [StrokeParams])
         return SetParametersResult(successful=reason is None, reason=reason or '')
 
     def _publish_diagnostics(self) -> None:
+        items = {'bursts_sent': self.bursts, 'stops_sent': self.stops, 'windows_sent': self.windows,
+                 'stream_underruns': self.underruns, 'streaming': self._stream is not None,
+                 'subscribers': self._pub.get_subscription_count()}
         status = DiagnosticStatus(name=f'{self.get_name()}: stroke', hardware_id='micro_feeder',
-                                  level=DiagnosticStatus.OK, message='ok',
-                                  values=[KeyValue(key='bursts_sent', value=str(self.bursts)),
-                                          KeyValue(key='stops_sent', value=str(self.stops)),
-                                          KeyValue(key='subscribers', value=str(self._pub.get_subscription_count()))])
+                                  level=DiagnosticStatus.WARN if self.underruns else DiagnosticStatus.OK,
+                                  message='stream underruns' if self.underruns else 'ok',
+                                  values=[KeyValue(key=k, value=str(v)) for k, v in items.items()])
         self._pub_diag.publish(DiagnosticArray(header=Header(stamp=self.get_clock().now().to_msg()),
                                                status=[status]))
 

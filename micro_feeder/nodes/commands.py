@@ -6,14 +6,22 @@ simulator logs it, counts it on ``/diagnostics`` and carries on with the command
 
 from __future__ import annotations
 
+import array
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from trajectory_msgs.msg import JointTrajectory
+import rclpy.logging
+from rclpy.serialization import deserialize_message
+from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from ..physics.trajectory import CommandLimits
+from . import trajectory_cdr
 from .messages import seconds
+
+MAX_POINTS = 100_000     # points of one trajectory message: longer strokes go in windows
+_LOG = rclpy.logging.get_logger('micro_feeder.commands')
 
 
 class CommandRejected(ValueError):
@@ -44,32 +52,98 @@ def joint_names(n_actuators: int) -> list[str]:
     return [f'piezo_{k}' for k in range(n_actuators)]
 
 
-def _check_strokes(values: np.ndarray, limits: tuple[float, float], what: str) -> None:
+def _check_range(values: np.ndarray, low: float, high: float, what: str, unit: str) -> None:
+    """Refuse non-finite values and values outside [low, high] (one example named)."""
     if not np.all(np.isfinite(values)):
         raise CommandRejected(f'{what}: non-finite value')
-    low, high = limits
     outside = (values < low) | (values > high)
     if np.any(outside):
         bad = float(values[outside].flat[0])
-        raise CommandRejected(f'{what}: stroke {bad:g} m outside the piezo limits [{low:g}, {high:g}] m')
+        raise CommandRejected(f'{what} {bad:g} {unit} outside [{low:g}, {high:g}] {unit}')
+
+
+def _check_strokes(values: np.ndarray, limits: tuple[float, float], what: str) -> None:
+    _check_range(values, limits[0], limits[1], f'{what}: stroke', 'm (the piezo limits)')
+
+
+def _field(points: Sequence[JointTrajectoryPoint], attr: str, order: list[int], required: bool) -> np.ndarray | None:
+    """(points, joints) array of one field in the simulator's joint order, or None when empty on every
+    point (and not ``required``). No per-value Python."""
+    n_joints = len(order)
+    arrays = [getattr(p, attr) for p in points]
+    lengths = np.fromiter(map(len, arrays), dtype=np.int64, count=len(arrays))
+    if not required and not lengths.any():
+        return None
+    if np.any(lengths != n_joints):
+        raise CommandRejected(f'trajectory: {attr} must have {n_joints} values (one per joint) on every point'
+                              f'{"" if required else " or be empty on all"}, got lengths '
+                              f'{np.unique(lengths).tolist()}')
+    if all(isinstance(a, array.array) for a in arrays):     # rclpy's messages: one join of the buffers
+        table = np.frombuffer(b''.join(arrays), dtype=np.float64).reshape(len(points), n_joints)
+    else:                                                  # decoded from a log: lists
+        table = np.array(arrays, dtype=float).reshape(len(points), n_joints)
+    return table[:, order]
 
 
 def parse_trajectory(msg: JointTrajectory, joints: Sequence[str], limits: tuple[float, float]) -> TrajectoryCommand:
     """Check a JointTrajectory against the simulator's ``joints`` and stroke ``limits`` (m).
 
     Rules: every joint named exactly once (no unknown, missing or repeated names; an empty message may
-    leave ``joint_names`` empty); ``time_from_start`` >= 0 and strictly increasing; positions on every
-    knot, velocities on every knot or none, accelerations only with velocities, on every knot or none;
-    every array one value per joint; all values finite; positions within the piezo limits; the header
-    stamp not negative.
+    leave ``joint_names`` empty); at most :data:`MAX_POINTS` points (refused before anything is read);
+    ``time_from_start`` >= 0 and strictly increasing; positions on every knot, velocities on every knot
+    or none, accelerations only with velocities, on every knot or none; every array one value per joint;
+    all values finite; positions within the piezo limits, velocities and accelerations within
+    :class:`~micro_feeder.physics.trajectory.CommandLimits`; the header stamp not negative. A
+    positions-only trajectory is accepted with a one-time warning (its linear interpolation has zero
+    acceleration between knots, so the surface pushes the part only at the knots).
+    What the interpolation does between knots is checked when the trajectory is applied
+    (:meth:`~micro_feeder.nodes.stepper.Stepper.command_trajectory`).
     """
-    stamp = seconds(msg.header.stamp)
+    points = msg.points
+
+    def knots(order: list[int]) -> tuple[np.ndarray, ...]:
+        sec = np.fromiter((p.time_from_start.sec for p in points), dtype=np.int64, count=len(points))
+        nanosec = np.fromiter((p.time_from_start.nanosec for p in points), dtype=np.int64, count=len(points))
+        return (sec + nanosec * 1e-9, _field(points, 'positions', order, True),
+                _field(points, 'velocities', order, False), _field(points, 'accelerations', order, False))
+
+    return _checked(seconds(msg.header.stamp), list(msg.joint_names), len(points), knots, joints, limits)
+
+
+def parse_trajectory_cdr(data: bytes, joints: Sequence[str], limits: tuple[float, float]) -> TrajectoryCommand:
+    """:func:`parse_trajectory` of a serialized JointTrajectory, reading the knots of the usual layout
+    (positions, velocities and accelerations on every point, as the actuator sends) with numpy instead of
+    deserializing one Python object per point; any other layout is deserialized by rclpy. A message of
+    more than :data:`MAX_POINTS` points is refused without reading them. Raises :class:`CommandRejected`
+    (also for bytes that are not a JointTrajectory)."""
+    decoded = trajectory_cdr.decode(data, MAX_POINTS)
+    if decoded is None or (decoded.records is None and 0 < decoded.n_points <= MAX_POINTS):
+        try:
+            msg = deserialize_message(data, JointTrajectory)
+        except Exception as err:  # rclpy raises several types for malformed bytes
+            raise CommandRejected(f'trajectory: cannot deserialize: {err}') from err
+        return parse_trajectory(msg, joints, limits)
+    records = decoded.records
+
+    def knots(order: list[int]) -> tuple[np.ndarray, ...]:
+        offsets = records['sec'].astype(np.int64) + records['nanosec'] * 1e-9
+        return offsets, records['pos'][:, order], records['vel'][:, order], records['acc'][:, order]
+
+    return _checked(decoded.stamp, decoded.names, decoded.n_points, knots, joints, limits)
+
+
+def _checked(stamp: float, names: list[str], n_points: int, knots: Callable[[list[int]], tuple[np.ndarray, ...]],
+             joints: Sequence[str], limits: tuple[float, float]) -> TrajectoryCommand:
+    """The checks of :func:`parse_trajectory`; ``knots(order)`` reads (offsets, positions, velocities or
+    None, accelerations or None) with columns in the simulator's joint ``order``, only once the cheap
+    checks have passed."""
     if stamp < 0:
         raise CommandRejected(f'trajectory: negative header.stamp {stamp:g} s')
-    points = msg.points
-    if not points:
+    if not n_points:
         return TrajectoryCommand(stamp, np.zeros(0), np.zeros((0, len(joints))), None, None)
-    names = list(msg.joint_names)
+    if n_points > MAX_POINTS:
+        raise CommandRejected(f'trajectory: {n_points} points, more than {MAX_POINTS}: send long strokes '
+                              'in windows (each replaces the schedule from its start on), as the actuator does')
     unknown = [n for n in names if n not in joints]
     if unknown:
         raise CommandRejected(f'trajectory: unknown joint names {unknown} (known: {list(joints)})')
@@ -78,42 +152,36 @@ def parse_trajectory(msg: JointTrajectory, joints: Sequence[str], limits: tuple[
     missing = [n for n in joints if n not in names]
     if missing:
         raise CommandRejected(f'trajectory: joints {missing} missing (every joint must be commanded)')
-    order = [names.index(n) for n in joints]
-    offsets = np.array([seconds(p.time_from_start) for p in points])
+    offsets, positions, velocities, accelerations = knots([names.index(n) for n in joints])
     if offsets[0] < 0 or np.any(np.diff(offsets) <= 0):
+        bad = int(np.argmax(offsets < 0)) if offsets[0] < 0 else int(np.argmax(np.diff(offsets) <= 0)) + 1
         raise CommandRejected(f'trajectory: time_from_start must be >= 0 and strictly increasing, got '
-                              f'{offsets.tolist()}')
-
-    def field(attr: str, required: bool) -> np.ndarray | None:
-        lengths = {len(getattr(p, attr)) for p in points}
-        if lengths == {0} and not required:
-            return None
-        if lengths != {len(joints)}:
-            raise CommandRejected(f'trajectory: {attr} must have {len(joints)} values (one per joint) on '
-                                  f'every point{"" if required else " or be empty on all"}, got lengths '
-                                  f'{sorted(lengths)}')
-        table = np.array([list(getattr(p, attr)) for p in points], dtype=float)[:, order]
-        if not np.all(np.isfinite(table)):
-            raise CommandRejected(f'trajectory: non-finite value in {attr}')
-        return table
-
-    positions = field('positions', True)
-    velocities = field('velocities', False)
-    accelerations = field('accelerations', False)
+                              f'{offsets[max(bad - 1, 0)]:.9f} s then {offsets[bad]:.9f} s at point {bad}')
     if accelerations is not None and velocities is None:
         raise CommandRejected('trajectory: accelerations given without velocities')
+    bounds = CommandLimits(*limits)
     _check_strokes(positions, limits, 'trajectory')
+    if velocities is not None:
+        _check_range(velocities, -bounds.velocity, bounds.velocity, 'trajectory: velocity', 'm/s')
+    else:
+        _LOG.warning('positions-only trajectory: joint_trajectory_controller interpolates it linearly, so the '
+                     'stroke acceleration is zero between knots and the surface only pushes the part at the '
+                     'knots (it will barely move); send velocities and accelerations for smooth strokes',
+                     once=True)
+    if accelerations is not None:
+        _check_range(accelerations, -bounds.acceleration, bounds.acceleration, 'trajectory: acceleration',
+                     'm/s^2')
     return TrajectoryCommand(stamp, offsets, positions, velocities, accelerations)
 
 
 def parse_setpoints(data: Sequence[float], n_actuators: int, limits: tuple[float, float]) -> np.ndarray:
     """Check an ``actuator/command`` (Float64MultiArray data): one finite stroke (m) per actuator within
     the piezo ``limits``. Returns the set-points as an array."""
-    values = np.array(data, dtype=float)
+    values = np.frombuffer(data, dtype=np.float64) if isinstance(data, array.array) else np.array(data, dtype=float)
     if values.size != n_actuators:
         raise CommandRejected(f'command: {values.size} values for {n_actuators} actuators')
     _check_strokes(values, limits, 'command')
-    return values
+    return values.copy()
 
 
 def start_time(stamp: float, now: float) -> float:

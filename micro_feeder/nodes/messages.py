@@ -7,6 +7,7 @@ at the part with x along the surface tangent and z along its normal, tilted by Î
 from __future__ import annotations
 
 import math
+import struct
 from collections.abc import Sequence
 
 import numpy as np
@@ -40,6 +41,15 @@ def to_duration(t: float) -> Duration:
 def seconds(t: Time | Duration) -> float:
     """A ROS Time or Duration in seconds (the inverse of :func:`to_time` / :func:`to_duration`)."""
     return t.sec + t.nanosec * 1e-9
+
+
+def header_stamp(data: bytes) -> float:
+    """``header.stamp`` (s) of a serialized message that starts with a Header (CDR, either byte order), read
+    without deserializing the rest; 0 when the bytes are too short."""
+    if len(data) < 12:
+        return 0.0
+    sec, nanosec = struct.unpack_from('<iI' if data[1] == 1 else '>iI', data, 4)
+    return sec + nanosec * 1e-9
 
 
 def tilt_quaternion(theta: float) -> tuple[float, float, float, float]:
@@ -143,3 +153,4 @@ def trajectory(names: Sequence[str], offsets: np.ndarray, positions: np.ndarray,
                                    time_from_start=to_duration(float(offsets[i])))
               for i in range(len(offsets))]
     return JointTrajectory(header=Header(stamp=stamp), joint_names=list(names), points=points)
+

@@ -18,8 +18,9 @@ import numpy as np
 from ..physics.contact import ContactModel, ContactParams
 from ..physics.dynamics import Event, FeederModel, Observation
 from ..physics.particle import ParticleParams
-from ..physics.waveforms import StrokeSchedule, trajectory_table
-from .commands import TrajectoryCommand, start_time
+from ..physics.trajectory import CommandLimits, check_table
+from ..physics.waveforms import StrokeSchedule, StrokeTable, trajectory_table
+from .commands import CommandRejected, TrajectoryCommand, start_time
 
 # Prune the schedule's past pieces when it holds more than this many.
 _MAX_PIECES = 8
@@ -86,14 +87,22 @@ class Stepper:
     def command_trajectory(self, cmd: TrajectoryCommand) -> float:
         """Apply a checked trajectory: it replaces the schedule from its start time on (the stamp, or now
         when the stamp is 0 or past); knots are at stamp + time_from_start (receipt time + time_from_start
-        for stamp 0); an empty one holds the stroke from then on. Returns the start time (s)."""
+        for stamp 0); an empty one holds the stroke from then on. Returns the start time (s).
+
+        Raises :class:`CommandRejected` (the schedule unchanged) when the interpolated stroke, joined to
+        the stroke in force at the start, leaves the piezo limits anywhere between knots."""
         t0 = start_time(cmd.stamp, self.state.t)
         if cmd.is_stop:
             self.schedule.hold_from(t0)
         else:
             base = t0 if cmd.stamp == 0.0 else cmd.stamp
-            self.schedule.command_trajectory(t0, base + cmd.offsets, cmd.positions, cmd.velocities,
-                                             cmd.accelerations)
+            before = self.schedule.pieces
+            table = self.schedule.command_trajectory(t0, base + cmd.offsets, cmd.positions, cmd.velocities,
+                                                     cmd.accelerations)
+            reason = check_table(table, CommandLimits(*self.limits))
+            if reason is not None:
+                self.schedule = _schedule_of(before)
+                raise CommandRejected(f'trajectory: {reason}')
         self._prune()
         return t0
 
@@ -110,8 +119,13 @@ class Stepper:
             return
         now = self.state.t
         current = max((i for i, (t, _) in enumerate(pieces) if t <= now), default=0)
-        schedule = StrokeSchedule(pieces[current][1], pieces[current][0])
-        for t, table in pieces[current + 1:]:
-            schedule.replace_from(t, table)
-        self.schedule = schedule
+        self.schedule = _schedule_of(pieces[current:])
+
+
+def _schedule_of(pieces: list[tuple[float, StrokeTable]]) -> StrokeSchedule:
+    """A schedule made of ``pieces`` ((time from which it applies, table), in increasing time)."""
+    schedule = StrokeSchedule(pieces[0][1], pieces[0][0])
+    for t, table in pieces[1:]:
+        schedule.replace_from(t, table)
+    return schedule
 

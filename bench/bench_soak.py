@@ -1,0 +1,178 @@
+"""Soak benchmark: continuous strokes (``stroke.count`` 0, streamed by the actuator) against the simulator
+at 1 kHz publishing, as separate processes, for minutes.
+
+Per case (1 actuator 10 min, 16 actuators 10 min, 64 actuators 2 min by default; ``--minutes M`` runs
+every case M minutes, ``--cases 1,16`` picks cases) it reports, each with its target:
+
+* median real-time factor achieved (the simulator's ``/diagnostics``, one value per second): >= 0.99;
+* RSS growth of the simulator and of the actuator (MB/min, least-squares slope after the first
+  minute's tenth): < 1 MB/min;
+* CPU of the simulator process (% of one core): <= 25 / 35 / 50 % for 1 / 16 / 64 actuators; the
+  actuator's CPU is reported beside it;
+* stream underruns (actuator), rejected commands (simulator): 0.
+
+The travelling wave uses phases (k mod 4)/4: 4 distinct stroke starts per period, whatever the count.
+Prints the load average before and after: on a shared 2-core machine the figures move with it.
+
+    .venv/bin/python bench/bench_soak.py [--minutes M] [--cases 1,16,64]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import signal
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+os.environ.setdefault('ROS_DOMAIN_ID', str(90 + os.getpid() % 30))
+
+import rclpy  # imported after the environment is set: rcl reads it at init
+from diagnostic_msgs.msg import DiagnosticArray
+from rclpy.executors import SingleThreadedExecutor
+
+from micro_feeder.nodes._ros import topic_qos
+
+CLK_TCK = os.sysconf('SC_CLK_TCK')
+CASES = {1: (10.0, 25.0), 16: (10.0, 35.0), 64: (2.0, 50.0)}     # actuators: (minutes, CPU target %)
+BIN = Path(sys.executable).parent
+
+
+def cpu_seconds(pid: int) -> float:
+    """utime + stime (s) of a process."""
+    fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / CLK_TCK
+
+
+def rss_mb(pid: int) -> float:
+    for line in Path(f'/proc/{pid}/status').read_text().splitlines():
+        if line.startswith('VmRSS:'):
+            return int(line.split()[1]) / 1024
+    return float('nan')
+
+
+def feeder_args(n: int) -> list[str]:
+    """--ros-args parameters of an n-actuator travelling wave (1 mm apart, phases (k mod 4)/4)."""
+    centers = [round(k * 1e-3, 6) for k in range(n)]
+    phases = [(k % 4) / 4 for k in range(n)]
+    return ['-p', f'surface.centers:={centers}', '-p', f'surface.widths:={[1e-3] * n}',
+            '-p', f'stroke.phases:={phases}']
+
+
+def slope_per_minute(t: list[float], y: list[float]) -> float:
+    """Least-squares slope of y against t (s), per minute."""
+    return float(np.polyfit(np.asarray(t), np.asarray(y), 1)[0] * 60.0) if len(t) > 2 else float('nan')
+
+
+def run_case(n: int, minutes: float, cpu_target: float) -> dict:
+    common = feeder_args(n)
+    sim = subprocess.Popen([str(BIN / 'simulator'), '--ros-args', *common], stdout=subprocess.DEVNULL,
+                           stderr=subprocess.PIPE, text=True)
+    act = subprocess.Popen([str(BIN / 'actuator'), '--ros-args', *common, '-p', 'stroke.count:=0'],
+                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node('bench_soak', context=context)
+    latest: dict[str, dict[str, str]] = {}
+    rtf: list[float] = []
+
+    def on_diagnostics(msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            values = {kv.key: kv.value for kv in status.values}
+            latest[status.name.split(':')[0].strip('/')] = values
+            if status.name.endswith('simulator: loop') and streaming():
+                rtf.append(float(values['real_time_factor_achieved']))
+
+    def streaming() -> bool:
+        return latest.get('actuator', {}).get('streaming') == 'True'
+
+    node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, topic_qos('/diagnostics'))
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    samples: list[tuple[float, float, float, float, float]] = []   # t, sim cpu, act cpu, sim rss, act rss
+    try:
+        deadline = time.monotonic() + 60.0
+        while not streaming():
+            executor.spin_once(timeout_sec=0.1)
+            if time.monotonic() > deadline or sim.poll() is not None or act.poll() is not None:
+                raise RuntimeError('the actuator did not start streaming within 60 s')
+        start = time.monotonic()
+        end = start + minutes * 60.0
+        next_sample = start
+        while (now := time.monotonic()) < end:
+            if now >= next_sample:
+                samples.append((now - start, cpu_seconds(sim.pid), cpu_seconds(act.pid), rss_mb(sim.pid),
+                                rss_mb(act.pid)))
+                next_sample += 5.0
+                done = (now - start) / (end - start)
+                print(f'\r  {n} actuators: {done:5.1%}, RTF {rtf[-1] if rtf else float("nan"):.4f}', end='',
+                      file=sys.stderr, flush=True)
+            executor.spin_once(timeout_sec=0.1)
+        samples.append((time.monotonic() - start, cpu_seconds(sim.pid), cpu_seconds(act.pid), rss_mb(sim.pid),
+                        rss_mb(act.pid)))
+        print(file=sys.stderr)
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.shutdown(context=context)
+        for proc in (act, sim):
+            proc.send_signal(signal.SIGINT)
+        for proc in (act, sim):
+            try:
+                proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+    s = np.asarray(samples)
+    wall = s[-1, 0] - s[0, 0]
+    warm = s[:, 0] >= min(6.0, wall / 10)          # RSS settles once the first windows are out
+    return {
+        'actuators': n, 'minutes': wall / 60.0,
+        'rtf_median': statistics.median(rtf) if rtf else float('nan'), 'rtf_min': min(rtf, default=float('nan')),
+        'sim_cpu_pct': 100.0 * (s[-1, 1] - s[0, 1]) / wall, 'act_cpu_pct': 100.0 * (s[-1, 2] - s[0, 2]) / wall,
+        'sim_rss_mb_per_min': slope_per_minute(list(s[warm, 0]), list(s[warm, 3])),
+        'act_rss_mb_per_min': slope_per_minute(list(s[warm, 0]), list(s[warm, 4])),
+        'sim_rss_mb': s[-1, 3], 'act_rss_mb': s[-1, 4], 'cpu_target': cpu_target,
+        'underruns': latest.get('actuator', {}).get('stream_underruns', '?'),
+        'windows': latest.get('actuator', {}).get('windows_sent', '?'),
+        'rejected': latest.get('simulator', {}).get('rejected_commands', '?'),
+    }
+
+
+def ok(good: bool) -> str:
+    return 'ok' if good else 'MISSED'
+
+
+def report(r: dict) -> str:
+    return '\n'.join([
+        f"{r['actuators']} actuator(s), {r['minutes']:.2f} min of continuous strokes "
+        f"({r['windows']} windows, {r['underruns']} underruns, {r['rejected']} rejected)",
+        f"  real-time factor median {r['rtf_median']:.4f} (min {r['rtf_min']:.4f})   target >= 0.99  "
+        f"{ok(r['rtf_median'] >= 0.99)}",
+        f"  simulator CPU {r['sim_cpu_pct']:.1f} % of a core   target <= {r['cpu_target']:g} %  "
+        f"{ok(r['sim_cpu_pct'] <= r['cpu_target'])}   (actuator {r['act_cpu_pct']:.1f} %)",
+        f"  RSS growth simulator {r['sim_rss_mb_per_min']:+.3f} MB/min ({r['sim_rss_mb']:.0f} MB), actuator "
+        f"{r['act_rss_mb_per_min']:+.3f} MB/min ({r['act_rss_mb']:.0f} MB)   target < 1 MB/min  "
+        f"{ok(max(r['sim_rss_mb_per_min'], r['act_rss_mb_per_min']) < 1.0)}",
+    ])
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--minutes', type=float, help='minutes per case (default: 10 / 10 / 2)')
+    parser.add_argument('--cases', default='1,16,64', help='actuator counts to run (of 1, 16, 64)')
+    args = parser.parse_args()
+    print(f'load average before: {os.getloadavg()}')
+    for n in (int(c) for c in args.cases.split(',')):
+        minutes, cpu_target = CASES[n]
+        print(report(run_case(n, args.minutes or minutes, cpu_target)), flush=True)
+    print(f'load average after: {os.getloadavg()}')
+
+
+if __name__ == '__main__':
+    main()
