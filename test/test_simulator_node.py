@@ -126,7 +126,8 @@ def test_every_topic_with_its_type_frame_and_qos(running: Rig) -> None:
     pose = probe.msgs['particle/pose'][-1].pose
     assert pose.position.x == pytest.approx(0.5e-3) and pose.position.y == 0.0
     expected = {'particle/pose': (ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 100),
-                'particle/contact_state': (ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 1),
+                'particle/contact_state': (ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 1000),
+                'particle/transitions': (ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 1000),
                 'surface/markers': (ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 1),
                 '/clock': (ReliabilityPolicy.BEST_EFFORT, DurabilityPolicy.VOLATILE, 1),
                 'actuator/joint_states': (ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 100)}

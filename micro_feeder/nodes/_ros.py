@@ -87,3 +87,8 @@ def topic_qos(name: str, min_depth: int = 0) -> QoSProfile:
     reliability = ReliabilityPolicy.RELIABLE if spec.reliable else ReliabilityPolicy.BEST_EFFORT
     durability = DurabilityPolicy.TRANSIENT_LOCAL if spec.transient_local else DurabilityPolicy.VOLATILE
     return QoSProfile(depth=max(spec.depth, min_depth), reliability=reliability, durability=durability)
+
+
+# Services: requests queued deep enough for bursts (200 asynchronous ~/step calls all answered; the
+# rclpy default keeps 10 and silently drops the rest). Clients sending bursts need the same depth.
+SERVICE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
