@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import math
 import struct
+import sys
 import threading
 import time
 from collections.abc import Iterable, Mapping
@@ -50,7 +51,7 @@ from ..physics.dynamics import Event, SimulationError
 from ..physics.parameters import ParameterError, ParamSpec
 from ..realtime.diagnostics import LoopSnapshot, achieved_rtf, loop_status
 from ..realtime.intake import CommandIntake, IntakeCounters, Outcome, Received, ThrottledLog, plan
-from ..realtime.loop import TickLoop
+from ..realtime.loop import GIL_SWITCH_INTERVAL, TickLoop
 from . import messages
 from ._ros import SERVICE_QOS, topic_qos
 from .commands import joint_names, parse_setpoints, parse_trajectory, start_time
@@ -77,12 +78,13 @@ NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
                            'call and per command message received', kind='bool', read_only=True), False),
     'max_command_bytes': (ParamSpec('largest command message accepted (serialized size); a larger one is '
                                     'refused unparsed: send long strokes in windows', 'B', ge=1024, le=2 ** 30,
-                                    kind='int', read_only=True), 4 * 2 ** 20),
+                                    kind='int', read_only=True), 2 ** 20),
 }
 
 PART_SIZE = 100e-6     # marker diameter of the part (m)
 MARKER_POINTS = 200    # points of the surface line strip
 BUSY_TIMEOUT = 2.0     # s a service waits for a tick in progress before answering "busy"
+COMMAND_QUEUE = 1000   # commands the subscription holds while the executor is busy (a flood waits, not lost)
 COMMAND_TYPES = {'actuator/trajectory': JointTrajectory, 'actuator/command': Float64MultiArray}
 
 
@@ -149,7 +151,7 @@ class Simulator(Node):
         self._pub_receipts = self._publisher(Header, 'simulator/command_receipts', '~/command_receipts')
         for topic, msg_type in COMMAND_TYPES.items():
             self.create_subscription(msg_type, topic, lambda data, t=topic: self._on_command(t, data),
-                                     topic_qos(topic), raw=True)
+                                     topic_qos(topic, COMMAND_QUEUE), raw=True)
         self.create_service(Trigger, '~/reset', self._on_reset, qos_profile=SERVICE_QOS)
         self.create_service(SetBool, '~/pause', self._on_pause, qos_profile=SERVICE_QOS)
         self.create_service(Trigger, '~/step', self._on_step, qos_profile=SERVICE_QOS)
@@ -157,10 +159,11 @@ class Simulator(Node):
         self.commands = IntakeCounters()
         self._refusal_log = ThrottledLog()
         self.steps_granted = 0
+        self.states_published = 0
         self.error = ''
         self._mode = ''
         self._generation = 0                # model generation: commands parsed for an older model re-parse
-        self._window = (time.perf_counter(), self._stepper.t)
+        self._window = (time.perf_counter(), self._stepper.t, 0)
         self.achieved_rtf = 0.0
         self._last_markers = -float('inf')
         self._configure_outputs()
@@ -169,7 +172,8 @@ class Simulator(Node):
         self.create_timer(1.0, self._publish_diagnostics, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self._intake = CommandIntake(self._process_commands, lambda: self._paused,
                                      max_message_bytes=self._max_command_bytes,
-                                     max_queued_bytes=4 * self._max_command_bytes)
+                                     max_queued_bytes=4 * self._max_command_bytes,
+                                     batch_interval=0.5 * self._period)
         if not self._lockstep:
             self._loop = TickLoop(self._period, self._tick, self._loop_failed)
             self._set_paused(self._user_paused)
@@ -307,6 +311,7 @@ class Simulator(Node):
         self._publish_diagnostics()
 
     def _publish_state(self, events: list[Event]) -> None:
+        self.states_published += 1
         obs = self._stepper.observe()
         state = self._state_messages
         stamp = state.update(obs, obs.stroke_velocities)
@@ -349,10 +354,6 @@ class Simulator(Node):
 
     def _parse(self, received: Received) -> tuple[str, Any]:
         """A checked command for the current model, or ValueError with the reason (no lock needed)."""
-        size = len(received.data)
-        if size > self._max_command_bytes:
-            raise ValueError(f'{received.topic}: message of {size} B over max_command_bytes '
-                             f'({self._max_command_bytes} B): send long strokes in windows')
         try:
             msg = deserialize_message(received.data, COMMAND_TYPES[received.topic])
         except Exception as err:  # rclpy raises several types for malformed bytes
@@ -442,7 +443,7 @@ class Simulator(Node):
                 self.error = ''
                 self._mode = ''
                 self._configure_outputs()
-                self._window = (time.perf_counter(), 0.0)
+                self._window = (time.perf_counter(), 0.0, self.states_published)
                 self._publish_parameters()
                 self._publish_state([])
                 self._set_paused(self._user_paused)
@@ -514,18 +515,21 @@ class Simulator(Node):
     def diagnostics(self) -> DiagnosticStatus:
         """The simulator's status (:func:`loop_status`): achieved real-time factor over the time since the
         last call, tick timing, counters. Takes no lock, so it reports even while a tick is stuck."""
-        now, t = time.perf_counter(), self._stepper.t
-        wall0, sim0 = self._window
+        now, t, published = time.perf_counter(), self._stepper.t, self.states_published
+        wall0, sim0, published0 = self._window
         self.achieved_rtf = achieved_rtf((wall0, now), (sim0, t))
-        self._window = (now, t)
+        publish_rate = achieved_rtf((wall0, now), (published0, published))
+        self._window = (now, t, published)
         loop = self._loop
         periods, busy = loop.timing.drain() if loop is not None else (np.zeros(0), np.zeros(0))
         state = self._stepper.state
         status = loop_status(LoopSnapshot(
             sim_time=t, mode=state.mode, paused=self._paused, lockstep=self._lockstep, error=self.error,
-            rtf_target=self._rtf, achieved_rtf=self.achieved_rtf, periods_ms=periods, busy_ms=busy,
+            rtf_target=self._rtf, achieved_rtf=self.achieved_rtf,
+            publish_rate=publish_rate, periods_ms=periods, busy_ms=busy,
             overruns=self.overruns, tick_age=loop.timing.tick_age(now) if loop is not None else 0.0,
-            steps_granted=self.steps_granted, pending_reset=self._model_pending, transitions=state.transitions,
+            steps_granted=self.steps_granted, states_published=self.states_published,
+            pending_reset=self._model_pending, transitions=state.transitions,
             intake=self.commands.as_items()))
         if status.level != 0:
             self.get_logger().warning(status.message, throttle_duration_sec=10.0)
@@ -562,4 +566,5 @@ class _Release:
 
 def main(args: list[str] | None = None) -> int:
     """Console script ``simulator``: ``simulator --ros-args --params-file config/feeder.yaml -p ...``."""
+    sys.setswitchinterval(GIL_SWITCH_INTERVAL)
     return spin_node('simulator', Simulator, args)

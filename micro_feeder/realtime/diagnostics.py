@@ -23,11 +23,13 @@ class LoopSnapshot:
     error: str
     rtf_target: float
     achieved_rtf: float
+    publish_rate: float
     periods_ms: np.ndarray
     busy_ms: np.ndarray
     overruns: int
     tick_age: float
     steps_granted: int
+    states_published: int
     pending_reset: bool
     transitions: Mapping[str, int]
     intake: Mapping[str, str]
@@ -41,7 +43,7 @@ class LoopStatus:
 
 
 def achieved_rtf(wall: tuple[float, float], sim: tuple[float, float]) -> float:
-    """Sim seconds per wall second between two (wall, sim) readings; 0 over no wall time."""
+    """Sim seconds (or any count) per wall second between two readings; 0 over no wall time."""
     return (sim[1] - sim[0]) / (wall[1] - wall[0]) if wall[1] > wall[0] else 0.0
 
 
@@ -65,10 +67,12 @@ def loop_status(s: LoopSnapshot) -> LoopStatus:
         message = 'lockstep' if s.lockstep else 'paused' if s.paused else 'running'
     values = {'sim_time_s': f'{s.sim_time:.9f}', 'mode': s.mode, 'paused': str(s.paused),
               'real_time_factor_target': f'{s.rtf_target:g}', 'real_time_factor_achieved': f'{s.achieved_rtf:.4f}',
+              'publish_rate_achieved': f'{s.publish_rate:.1f}',
               'tick_period_p50_ms': _pct(s.periods_ms, 50), 'tick_period_p99_ms': _pct(s.periods_ms, 99),
               'tick_compute_p99_ms': _pct(s.busy_ms, 99), 'overruns': str(s.overruns),
               'tick_in_progress_s': f'{s.tick_age:.3f}',
               'lockstep': str(s.lockstep), 'steps_granted': str(s.steps_granted),
+              'states_published': str(s.states_published),
               **s.intake, 'model_parameters_pending_reset': str(s.pending_reset)}
     values.update({k: str(v) for k, v in s.transitions.items()})
     return LoopStatus(level, message, values)

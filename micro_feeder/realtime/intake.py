@@ -9,9 +9,9 @@ effect: a command is **coalesced** (counted, acknowledged, never parsed) when a 
 the same batch starts at or before its start, because that one replaces everything from its start on
 (docs/interface.md, *Commands*). Commands that survive are applied in arrival order.
 
-Bounds: a message larger than ``max_message_bytes`` is refused unparsed; the queue holds at most
-``max_queued_bytes`` of messages (the oldest are dropped, counted, beyond that). Nothing here knows ROS:
-the node passes in how to parse and apply.
+Bounds: a message larger than ``max_message_bytes`` is refused on arrival, unparsed; the queue holds at
+most ``max_queued_bytes`` of messages (the oldest are dropped, counted, beyond that). Nothing here knows
+ROS: the node passes in how to parse and apply.
 """
 
 from __future__ import annotations
@@ -27,12 +27,14 @@ REFUSAL_LOG_PERIOD = 5.0    # s (wall clock) between two summary lines of repeat
 
 @dataclass
 class Received:
-    """One command message as it arrived: its topic, its serialized bytes (None once dropped), and its
-    start stamp (s, sim time; 0 = on receipt) read without parsing the rest."""
+    """One command message as it arrived: its topic, its serialized bytes (None once dropped or when
+    refused on arrival), its start stamp (s, sim time; 0 = on receipt) read without parsing the rest, and
+    the reason it was refused on arrival (too large), if it was."""
 
     topic: str
     data: bytes | None
     stamp: float
+    refused: str = ''
 
 
 @dataclass
@@ -47,7 +49,7 @@ class Outcome:
 
     @property
     def dropped(self) -> bool:
-        return self.received.data is None
+        return self.received.data is None and not self.received.refused
 
 
 @dataclass
@@ -101,7 +103,7 @@ def plan(batch: list[Received], now: float, start_time: Callable[[float, float],
     coalesced (with ``coalesce``) when a later valid one starts at or before its start
     (``start_time(stamp, now)``), else parsed (``parse`` returns the command or raises ``ValueError``
     with the reason)."""
-    outcomes = [Outcome(r) for r in batch]
+    outcomes = [Outcome(r, refused=r.refused) for r in batch]
     horizon = float('inf')      # earliest start of a valid command later in the batch
     for outcome in reversed(outcomes):
         received = outcome.received
@@ -137,10 +139,12 @@ class CommandIntake:
     """
 
     def __init__(self, process: Callable[[list[Received]], None], synchronous: Callable[[], bool], *,
-                 max_message_bytes: int, max_queued_bytes: int, name: str = 'simulator-intake'):
+                 max_message_bytes: int, max_queued_bytes: int, batch_interval: float = 0.0,
+                 name: str = 'simulator-intake'):
         self.max_message_bytes = max_message_bytes
         self.max_queued_bytes = max_queued_bytes
         self.dropped = 0
+        self.batch_interval = batch_interval
         self._process = process
         self._synchronous = synchronous
         self._queue = _Queue()
@@ -151,6 +155,11 @@ class CommandIntake:
         self._thread.start()
 
     def submit(self, received: Received) -> None:
+        size = len(received.data or b'')
+        if size > self.max_message_bytes:
+            received.data = None
+            received.refused = (f'{received.topic}: message of {size} B over max_command_bytes '
+                                f'({self.max_message_bytes} B): send long strokes in windows')
         with self._cv:
             self._queue.items.append(received)
             self._queue.queued_bytes += len(received.data or b'')
@@ -196,3 +205,4 @@ class CommandIntake:
                 if self._stopping:
                     return
             self.drain()
+            time.sleep(self.batch_interval)
