@@ -93,3 +93,15 @@ def test_an_outside_client_sees_every_transition_of_a_50_slide_run(ros_context: 
     assert stamps == pytest.approx(times, abs=1e-9)
     for name, (code, out) in results.items():
         assert code == 0, f'{name} exited with {code}:\n{out}'
+
+
+@pytest.mark.parametrize(('args', 'expected'), [
+    (('-p', 'contact.sigmaa:=1e-8'), "unknown parameter; did you mean contact.sigma"),
+    (('-p', 'surface.centers:=[0,0.002]'), 'every value of a list must have one type'),
+    (('-p', 'publish_rate:=-5.0'), 'publish_rate'),
+])
+def test_start_up_mistakes_are_one_clear_line(args: tuple[str, ...], expected: str) -> None:
+    proc = start_process('simulator', *args)
+    out, _ = proc.communicate(timeout=120)
+    assert proc.returncode == 2, out
+    assert expected in out and 'Traceback' not in out, out
