@@ -14,7 +14,7 @@ from typing import Any
 
 from . import CommandError
 from ._common import add_model_options, settings_from_args
-from ._session import ros_session, validate
+from ._session import add_namespace_option, namespace, ros_session, validate
 
 # With --record, the controller starts once the recorder subscribes to these (so the log holds every state).
 RECORDED_BEFORE_START = ('particle/pose', 'particle/twist', 'actuator/trajectory', 'simulator/command_receipts')
@@ -33,6 +33,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help='give up after this much sim time (default 2 s)')
     parser.add_argument('--record', metavar='PATH', help='record every topic to this log (docs/logs.md)')
     parser.add_argument('--json', action='store_true', help='print one JSON object and nothing else')
+    add_namespace_option(parser)
     parser.set_defaults(func=run)
 
 
@@ -40,18 +41,19 @@ def run(args: argparse.Namespace) -> int:
     flat = settings_from_args(args)
     if not args.timeout > 0:
         raise CommandError('--timeout must be > 0')
+    ns = namespace(args.namespace)
     validate(flat, controller=True)      # before the recorder creates the log
-    with ros_session(args.record) as session:
+    with ros_session(args.record, ns) as session:
         from ..nodes.feed_controller import FeedController
         from ..nodes.simulator import Simulator
 
-        sim = session.add(lambda: Simulator(context=session.context,
+        sim = session.add(lambda: Simulator(context=session.context, namespace=ns,
                                             overrides={**flat, 'lockstep': args.lockstep}))
+        end = sim.stop_at(args.timeout)     # at once: sim time runs while the other nodes are built
         if session.recorder is not None:     # the log starts before the loop does
             session.spin(lambda: all(sim.count_subscribers(topic) > 0 for topic in RECORDED_BEFORE_START))
-        controller = session.add(lambda: FeedController(context=session.context,
+        controller = session.add(lambda: FeedController(context=session.context, namespace=ns,
                                                         overrides={**flat, 'lockstep': args.lockstep}))
-        end = sim.stop_at(args.timeout)
         start = time.perf_counter()
         session.spin(lambda: controller.done or bool(sim.error), end)
         wall = time.perf_counter() - start

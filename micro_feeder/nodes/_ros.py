@@ -80,6 +80,13 @@ def spin_until(executor: Executor, done: Callable[[], bool], future: Future | No
         executor.spin_until_future_complete(future, timeout_sec=SPIN_SLICE)
 
 
+def status_name(node: Any, what: str) -> str:
+    """A ``/diagnostics`` status name that stays unique with several feeders on one graph: the node's
+    fully qualified name without the leading slash, then ``what`` (``simulator: loop``,
+    ``feeder1/simulator: loop``)."""
+    return f'{node.get_fully_qualified_name().lstrip("/")}: {what}'
+
+
 def topic_qos(name: str, min_depth: int = 0) -> QoSProfile:
     """The QoS of a topic of DESIGN.md §3 (relative name, e.g. ``particle/pose``) from the shared table
     (logs/topics.py), with a history at least ``min_depth`` deep."""

@@ -53,7 +53,7 @@ from ..realtime.diagnostics import LoopSnapshot, achieved_rtf, loop_status
 from ..realtime.intake import CommandIntake, IntakeCounters, Outcome, Received, ThrottledLog, plan
 from ..realtime.loop import GIL_SWITCH_INTERVAL, TickLoop
 from . import messages
-from ._ros import SERVICE_QOS, topic_qos
+from ._ros import SERVICE_QOS, status_name, topic_qos
 from .commands import joint_names, parse_setpoints, parse_trajectory, start_time
 from .parameters import check_changes, declare, model_specs, values
 from .spin import spin_node
@@ -166,6 +166,7 @@ class Simulator(Node):
         self._window = (time.perf_counter(), self._stepper.t, 0)
         self.achieved_rtf = 0.0
         self._last_markers = -float('inf')
+        self._status_source = status_name(self, 'transition').removesuffix(': transition')
         self._configure_outputs()
         self._publish_parameters()
         self._publish_state([])
@@ -321,7 +322,7 @@ class Simulator(Node):
         self._pub_joints.publish(state.joints)
         for event in events:
             if event.kind != 'reversal':
-                self._pub_transitions.publish(transition_message(event, self.get_name()))
+                self._pub_transitions.publish(transition_message(event, self._status_source))
                 self._publish_mode(event.to_mode)
         self._publish_mode(obs.mode)
         if self._pub_clock is not None:
@@ -533,7 +534,7 @@ class Simulator(Node):
             intake=self.commands.as_items()))
         if status.level != 0:
             self.get_logger().warning(status.message, throttle_duration_sec=10.0)
-        return DiagnosticStatus(name=f'{self.get_name()}: loop', hardware_id='micro_feeder',
+        return DiagnosticStatus(name=status_name(self, 'loop'), hardware_id='micro_feeder',
                                 level=bytes([status.level]), message=status.message,
                                 values=[KeyValue(key=k, value=v) for k, v in status.values.items()])
 

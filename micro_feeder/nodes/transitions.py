@@ -18,8 +18,9 @@ TRANSITION_KINDS = ('stick_to_slip', 'slip_to_stick', 'take_off', 'landing')
 
 
 def transition_message(event: Event, source: str) -> DiagnosticArray:
-    """``event`` as one status named ``{source}: transition``: ``message`` = the kind, key/values ``kind``,
-    ``from``, ``to``, ``t_s`` (exact sim time, repr of the float) and ``x_m`` (position, m);
+    """``event`` as one status named ``{source}: transition`` (source: the node, ``feeder1/simulator``):
+    ``message`` = the kind, key/values ``kind``, ``from``, ``to``, ``t_s`` (exact sim time, repr of the
+    float) and ``x_m`` (position, m);
     ``header.stamp`` = the sim time rounded to the nanosecond, frame ``feeder``."""
     status = DiagnosticStatus(level=DiagnosticStatus.OK, name=f'{source}: transition', message=event.kind,
                               hardware_id='micro_feeder',
