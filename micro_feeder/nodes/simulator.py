@@ -83,7 +83,8 @@ NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
 
 PART_SIZE = 100e-6     # marker diameter of the part (m)
 MARKER_POINTS = 200    # points of the surface line strip
-BUSY_TIMEOUT = 2.0     # s a service waits for a tick in progress before answering "busy"
+BUSY_TIMEOUT = 0.5     # s a service waits for a tick in progress before answering "busy"
+STOP_TIMEOUT = 0.3     # s destroy_node waits for each of the loop and intake threads (Ctrl-C answered < 1 s)
 COMMAND_QUEUE = 1000   # commands the subscription holds while the executor is busy (a flood waits, not lost)
 COMMAND_TYPES = {'actuator/trajectory': JointTrajectory, 'actuator/command': Float64MultiArray}
 
@@ -114,6 +115,7 @@ class Simulator(Node):
         # First, what destroy_node() needs: rclpy destroys a node whose construction failed below (a refused
         # parameter) at shutdown, and that must not end in an AttributeError hiding the reason.
         self._loop: TickLoop | None = None
+        self.threads_left_running = False   # set by destroy_node: a tick was still stuck in the physics
         self._intake: CommandIntake | None = None
         self._lock = threading.RLock()      # the stepper and the state publishers: tick thread vs the rest
         self._t_end = math.inf              # stop_at(): sim time never advances past this
@@ -241,12 +243,12 @@ class Simulator(Node):
             self._set_paused(True)
 
     def destroy_node(self) -> None:
-        """Stop the loop and intake threads (waiting up to 1 s each for work in progress), then destroy
-        the node (publishers last)."""
+        """Stop the loop and intake threads (waiting up to :data:`STOP_TIMEOUT` each for work in
+        progress: a tick stuck in the physics is left to die with the process), then destroy the node."""
         if self._loop is not None:
-            self._loop.stop(timeout=1.0)
+            self.threads_left_running = not self._loop.stop(timeout=STOP_TIMEOUT)
         if self._intake is not None:
-            self._intake.stop(timeout=1.0)
+            self._intake.stop(timeout=STOP_TIMEOUT)
         super().destroy_node()
 
     # -- loop ---------------------------------------------------------------------------------------

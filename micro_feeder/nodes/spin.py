@@ -7,8 +7,11 @@ Uses the EventsExecutor on the thread that spins it (half the CPU of the SingleT
 
 from __future__ import annotations
 
+import os
 import sys
+import threading
 from collections.abc import Callable
+from typing import Any
 
 import rclpy
 from rclpy._rclpy_pybind11 import RCLError
@@ -19,7 +22,7 @@ from rclpy.signals import SignalHandlerOptions
 
 from ..physics.dynamics import SimulationError
 from ..physics.parameters import ParameterError
-from ._ros import StopFlag, spin_until
+from ._ros import SPIN_SLICE, StopFlag, spin_until
 
 
 def spin_nodes(nodes: list[Node], done: Callable[[], bool], context: Context | None = None) -> None:
@@ -49,6 +52,29 @@ def init_ros(name: str, args: list[str] | None) -> StopFlag | None:
     return stop
 
 
+def build_interruptibly(factory: Callable[[], Node], stop: StopFlag) -> Node | None:
+    """``factory()`` on a helper thread while this (main) thread watches ``stop``, so that SIGINT/SIGTERM
+    are answered even while construction runs compiled code for long (the physics warm-up with extreme
+    parameters); None when stopped first. Exceptions of ``factory`` are raised here."""
+    result: dict[str, Any] = {}
+
+    def build() -> None:
+        try:
+            result['node'] = factory()
+        except BaseException as err:  # handed to the main thread
+            result['error'] = err
+
+    thread = threading.Thread(target=build, name='node-build', daemon=True)
+    thread.start()
+    while thread.is_alive():
+        thread.join(SPIN_SLICE)
+        if stop and thread.is_alive():
+            return None
+    if 'error' in result:
+        raise result['error']
+    return result['node']
+
+
 def spin_node(name: str, factory: Callable[[], Node], args: list[str] | None = None) -> int:
     """Console-script main: ``rclpy.init(args)`` (``--ros-args`` parsed by rcl), build the node, spin it
     until SIGINT/SIGTERM. A refused parameter value exits with status 2 and the reason on stderr, and so
@@ -57,14 +83,24 @@ def spin_node(name: str, factory: Callable[[], Node], args: list[str] | None = N
     if stop is None:
         return 2
     try:
-        node = factory()
+        node = build_interruptibly(factory, stop)
     except (ParameterError, SimulationError) as err:
         print(f'{name}: error: {err}', file=sys.stderr)
         rclpy.try_shutdown()
         return 2
+    if node is None:
+        print(f'{name}: stopped during start-up', file=sys.stderr)
+        sys.stderr.flush()
+        os._exit(0)     # the half-built node still runs compiled code on its thread: nothing to clean up
     try:
         spin_nodes([node], lambda: bool(stop))
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
+    if getattr(node, 'threads_left_running', False):
+        # a thread stuck in compiled code cannot be stopped, and the interpreter's finalisation took up to
+        # 1.4 s more with one: leave now, everything of ROS is shut down already
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(0)
     return 0
