@@ -115,7 +115,6 @@ class Simulator(Node):
         # First, what destroy_node() needs: rclpy destroys a node whose construction failed below (a refused
         # parameter) at shutdown, and that must not end in an AttributeError hiding the reason.
         self._loop: TickLoop | None = None
-        self.threads_left_running = False   # set by destroy_node: a tick was still stuck in the physics
         self._intake: CommandIntake | None = None
         self._lock = threading.RLock()      # the stepper and the state publishers: tick thread vs the rest
         self._t_end = math.inf              # stop_at(): sim time never advances past this
@@ -246,7 +245,7 @@ class Simulator(Node):
         """Stop the loop and intake threads (waiting up to :data:`STOP_TIMEOUT` each for work in
         progress: a tick stuck in the physics is left to die with the process), then destroy the node."""
         if self._loop is not None:
-            self.threads_left_running = not self._loop.stop(timeout=STOP_TIMEOUT)
+            self._loop.stop(timeout=STOP_TIMEOUT)
         if self._intake is not None:
             self._intake.stop(timeout=STOP_TIMEOUT)
         super().destroy_node()
