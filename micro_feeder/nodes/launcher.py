@@ -30,7 +30,7 @@ def _run(module: str) -> int:
     status = importlib.import_module(f'micro_feeder.nodes.{module}').main()
     sys.stdout.flush()
     sys.stderr.flush()
-    os._exit(status)
+    os._exit(int(status or 0))
 
 
 def simulator() -> int:
