@@ -41,11 +41,11 @@ setup(
     entry_points={
         'console_scripts': [
             'micro-feeder = micro_feeder.cli:main',
-            'actuator = micro_feeder.nodes.actuator:main',
-            'simulator = micro_feeder.nodes.simulator:main',
-            'recorder = micro_feeder.nodes.recorder:main',
-            'replay = micro_feeder.nodes.replay:main',
-            'feed_controller = micro_feeder.nodes.feed_controller:main',
+            'actuator = micro_feeder.nodes.launcher:actuator',
+            'simulator = micro_feeder.nodes.launcher:simulator',
+            'recorder = micro_feeder.nodes.launcher:recorder',
+            'replay = micro_feeder.nodes.launcher:replay',
+            'feed_controller = micro_feeder.nodes.launcher:feed_controller',
         ],
     },
 )

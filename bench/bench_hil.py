@@ -45,6 +45,9 @@ FEED_LEAD = 0.05        # s: command_lead given to the feed controller (its burs
 
 def run_simulator(out: Path, ros_args: list[str]) -> int:
     """``--role simulator``: the product's Simulator with both ends of the round trip timed."""
+    from rclpy.serialization import deserialize_message
+    from trajectory_msgs.msg import JointTrajectory
+
     from micro_feeder.nodes.simulator import Simulator
     from micro_feeder.nodes.spin import spin_node
 
@@ -69,11 +72,14 @@ def run_simulator(out: Path, ros_args: list[str]) -> int:
             super().__init__(*args, **kwargs)
             self._pub_pose = _TimedPublisher(self._pub_pose, self.sent)
 
-        def _on_trajectory(self, msg: Any) -> None:     # before the node's lock: wall time of delivery
-            stamp = msg.header.stamp
-            self.received.append((stamp.sec * 1_000_000_000 + stamp.nanosec, time.perf_counter(), len(msg.points),
-                                  round(self.stepper.t * 1e9)))
-            super()._on_trajectory(msg)
+        def _on_command(self, topic: str, data: bytes) -> None:     # on delivery, before the intake
+            if topic == 'actuator/trajectory':
+                received = time.perf_counter()
+                msg = deserialize_message(data, JointTrajectory)
+                stamp = msg.header.stamp
+                self.received.append((stamp.sec * 1_000_000_000 + stamp.nanosec, received, len(msg.points),
+                                      round(self.stepper.t * 1e9)))
+            super()._on_command(topic, data)
 
     nodes: list[TimedSimulator] = []
 

@@ -1,7 +1,8 @@
 """Start the simulator and the actuator (full ROS 2 install: ``ros2 launch micro_feeder micro_feeder.launch.py``).
 
 Arguments: ``params_file`` (default: the package's config/feeder.yaml), ``real_time_factor`` (1.0),
-``start_paused`` (false), ``auto_start`` (true). Both nodes read the same parameters file.
+``start_paused`` (false), ``auto_start`` (true), ``namespace`` ('' = root; give each feeder of a graph its
+own, docs/interface.md). Both nodes read the same parameters file.
 """
 
 import os
@@ -27,11 +28,15 @@ def generate_launch_description() -> LaunchDescription:
                               description='start paused (simulator/step, simulator/pause)'),
         DeclareLaunchArgument('auto_start', default_value='true',
                               description='actuator sends the burst once the simulator is connected'),
+        DeclareLaunchArgument('namespace', default_value='',
+                              description='namespace of this feeder (only the root one publishes /clock)'),
         Node(package='micro_feeder', executable='simulator', name='simulator', output='screen',
+             namespace=LaunchConfiguration('namespace'),
              parameters=[params_file, {
                  'real_time_factor': ParameterValue(LaunchConfiguration('real_time_factor'), value_type=float),
                  'start_paused': ParameterValue(LaunchConfiguration('start_paused'), value_type=bool)}]),
         Node(package='micro_feeder', executable='actuator', name='actuator', output='screen',
+             namespace=LaunchConfiguration('namespace'),
              parameters=[params_file, {
                  'auto_start': ParameterValue(LaunchConfiguration('auto_start'), value_type=bool)}]),
     ])

@@ -178,3 +178,16 @@ def test_a_slow_controller_reaches_the_same_state_in_lockstep(ros_context: Conte
 def test_timeout_stops_at_the_requested_sim_time():
     result = run_hil('--timeout', '0.01', '--set', 'feed.target_x=0.9e-3')
     assert not result['reached'] and result['sim_time_s'] == 0.01, result
+
+
+def test_lockstep_in_a_namespace_gives_the_same_run(tmp_path):
+    """``--namespace``: the controller finds the simulator's step service and topics in the namespace; the
+    run is the one of the root namespace, step for step, and the log holds only the namespace's topics."""
+    args = ['--lockstep', '--set', 'feed.target_x=0.45e-3']
+    root = run_hil(*args)
+    spaced = run_hil(*args, '--namespace', 'cell_3', '--record', str(tmp_path / 'log'))
+    assert spaced['reached'] and root['reached'], (root, spaced)
+    for key in ('strokes', 'bursts', 'final_error_m', 'sim_time_s', 'time_to_target_s'):
+        assert spaced[key] == root[key], key
+    topics = set(LogReader(tmp_path / 'log').topics)
+    assert all(t.startswith('/cell_3/') or t == '/diagnostics' for t in topics), topics

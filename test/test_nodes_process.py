@@ -3,11 +3,18 @@ client listening, a clean exit on SIGINT."""
 
 from __future__ import annotations
 
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray
 from node_helpers import Probe, stamp_s, start_process, stop_process
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
 from ros_helpers import wait_until
+from std_msgs.msg import String
 from std_srvs.srv import Trigger
+
+from micro_feeder.nodes._ros import topic_qos
+from micro_feeder.nodes.transitions import TRANSITION_KINDS
 
 
 def test_actuator_and_simulator_processes(ros_context: Context) -> None:
@@ -28,8 +35,6 @@ def test_actuator_and_simulator_processes(ros_context: Context) -> None:
         wait_until(lambda: {'simulator: loop', 'actuator: stroke'} <= {s.name for d in msgs['/diagnostics']
                                                                         for s in d.status},
                    10, executor=executor, what='diagnostics of both nodes')
-        # contact_state keeps only the latest mode (depth 1): a stuck-sliding-stuck within a millisecond may
-        # reach another process as 'stuck' only, so the slip is checked on the simulator's counters
         wait_until(lambda: any(kv.key == 'stick_to_slip' and int(kv.value) > 0 for d in msgs['/diagnostics']
                                for st in d.status if st.name == 'simulator: loop' for kv in st.values),
                    10, executor=executor, what='a stick-to-slip transition counted on /diagnostics')
@@ -41,3 +46,62 @@ def test_actuator_and_simulator_processes(ros_context: Context) -> None:
     for name, (code, out) in results.items():
         assert code == 0, f'{name} exited with {code}:\n{out}'
         assert 'Traceback' not in out, out
+
+
+def test_an_outside_client_sees_every_transition_of_a_50_slide_run(ros_context: Context) -> None:
+    """50 strokes of the default scenario slide the part 50 times, each slide shorter than a tick: a client
+    in this process, with the QoS of docs/interface.md, gets every contact-state change in order and every
+    stamped transition, as many as /diagnostics counts."""
+    sim = start_process('simulator', '-p', 'markers_rate:=1.0')
+    act = start_process('actuator', '-p', 'stroke.count:=50', '-p', 'auto_start:=false')
+    client = Node('transition_client', context=ros_context)
+    got: dict[str, list] = {'particle/contact_state': [], 'particle/transitions': [], '/diagnostics': []}
+    for topic, msg_type in (('particle/contact_state', String), ('particle/transitions', DiagnosticArray),
+                            ('/diagnostics', DiagnosticArray)):
+        client.create_subscription(msg_type, topic, got[topic].append, topic_qos(topic))
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(client)
+    try:
+        wait_until(lambda: client.count_publishers('particle/transitions') and got['particle/contact_state'], 120,
+                   executor=executor, what='the simulator process to publish')
+        start = client.create_client(Trigger, 'actuator/start')
+        wait_until(start.service_is_ready, 30, executor=executor, what='actuator/start')
+        future = start.call_async(Trigger.Request())
+        wait_until(future.done, 10, executor=executor, what='burst sent')
+
+        def counters() -> dict[str, int]:
+            loops = [st for d in got['/diagnostics'] for st in d.status if st.name == 'simulator: loop']
+            return {kv.key: int(kv.value) for kv in loops[-1].values if kv.key in TRANSITION_KINDS} if loops else {}
+
+        wait_until(lambda: counters().get('slip_to_stick', 0) >= 50, 30, executor=executor,
+                   what='50 slides counted on /diagnostics')
+        expected = counters()
+        wait_until(lambda: len(got['particle/transitions']) >= sum(expected.values()), 10, executor=executor,
+                   what='every transition message')
+    finally:
+        executor.shutdown()
+        client.destroy_node()
+        results = {name: stop_process(proc) for name, proc in (('actuator', act), ('simulator', sim))}
+    assert expected == {'stick_to_slip': 50, 'slip_to_stick': 50, 'take_off': 0, 'landing': 0}
+    states = [m.data for m in got['particle/contact_state']]
+    assert states == ['stuck'] + ['sliding', 'stuck'] * 50
+    events = [m.status[0] for m in got['particle/transitions']]
+    assert [e.message for e in events] == ['stick_to_slip', 'slip_to_stick'] * 50
+    times = [float(next(kv.value for kv in e.values if kv.key == 't_s')) for e in events]
+    assert times == sorted(times) and len(set(times)) == 100
+    stamps = [stamp_s(m) for m in got['particle/transitions']]
+    assert stamps == pytest.approx(times, abs=1e-9)
+    for name, (code, out) in results.items():
+        assert code == 0, f'{name} exited with {code}:\n{out}'
+
+
+@pytest.mark.parametrize(('args', 'expected'), [
+    (('-p', 'contact.sigmaa:=1e-8'), "unknown parameter; did you mean contact.sigma"),
+    (('-p', 'surface.centers:=[0,0.002]'), 'every value of a list must have one type'),
+    (('-p', 'publish_rate:=-5.0'), 'publish_rate'),
+])
+def test_start_up_mistakes_are_one_clear_line(args: tuple[str, ...], expected: str) -> None:
+    proc = start_process('simulator', *args)
+    out, _ = proc.communicate(timeout=120)
+    assert proc.returncode == 2, out
+    assert expected in out and 'Traceback' not in out, out

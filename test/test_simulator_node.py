@@ -22,8 +22,9 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import Marker
 
+from micro_feeder.nodes._ros import SERVICE_QOS
 from micro_feeder.nodes.actuator import sample_waveform
-from micro_feeder.nodes.commands import parse_trajectory
+from micro_feeder.nodes.commands import TrajectoryCommand, parse_trajectory
 from micro_feeder.nodes.messages import to_time
 from micro_feeder.nodes.simulator import Simulator, topic_qos
 from micro_feeder.nodes.stepper import Stepper, build_model
@@ -126,7 +127,8 @@ def test_every_topic_with_its_type_frame_and_qos(running: Rig) -> None:
     pose = probe.msgs['particle/pose'][-1].pose
     assert pose.position.x == pytest.approx(0.5e-3) and pose.position.y == 0.0
     expected = {'particle/pose': (ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 100),
-                'particle/contact_state': (ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 1),
+                'particle/contact_state': (ReliabilityPolicy.RELIABLE, DurabilityPolicy.TRANSIENT_LOCAL, 1000),
+                'particle/transitions': (ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 1000),
                 'surface/markers': (ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 1),
                 '/clock': (ReliabilityPolicy.BEST_EFFORT, DurabilityPolicy.VOLATILE, 1),
                 'actuator/joint_states': (ReliabilityPolicy.RELIABLE, DurabilityPolicy.VOLATILE, 100)}
@@ -453,3 +455,31 @@ def test_reset_builds_the_model_without_holding_the_lock(stepped: Rig, monkeypat
     stepped.step(2)
     assert stepped.probe.call(stepped.executor, Trigger, 'simulator/reset').success
     assert free == [True] and stepped.sim.stepper.t == 0.0
+
+
+def test_reset_alone_recovers_from_a_simulation_failure(running: Rig) -> None:
+    """A stroke velocity of 1e300 m/s (applied past the command checks) makes the physics fail: the
+    simulator pauses and reports it; ~/reset alone brings it back running from t = 0."""
+    sim = running.sim
+    running.wait(lambda: sim.stepper.t > 0.01, 'sim time running')
+    command = TrajectoryCommand(0.0, np.array([1e-3]), np.array([[1e-5]]), np.array([[1e300]]), None)
+    with sim._lock:
+        sim.stepper.command_trajectory(command)
+    running.wait(lambda: sim.error, 'the simulation failure')
+    assert sim.paused
+    assert not running.probe.pause(running.executor, False).success         # no resuming past a failure
+    response = running.probe.call(running.executor, Trigger, 'simulator/reset')
+    assert response.success and 'running' in response.message, response.message
+    assert not sim.error and not sim.paused
+    running.wait(lambda: sim.stepper.t > 0.01, 'sim time running again after the reset')
+
+
+def test_every_one_of_200_asynchronous_step_calls_is_answered(stepped: Rig) -> None:
+    """A client with the documented service QoS (depth 1000) sends 200 step requests at once: 200 answers,
+    200 steps."""
+    client = stepped.probe.create_client(Trigger, 'simulator/step', qos_profile=SERVICE_QOS)
+    stepped.wait(client.service_is_ready, 'simulator/step')
+    futures = [client.call_async(Trigger.Request()) for _ in range(200)]
+    stepped.wait(lambda: all(f.done() for f in futures), '200 answers', timeout=30)
+    assert all(f.result().success for f in futures)
+    assert stepped.sim.stepper.t == pytest.approx(200 * STEP, abs=1e-12) and stepped.sim.steps_granted == 200

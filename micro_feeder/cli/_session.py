@@ -3,8 +3,10 @@ optional recorder, one EventsExecutor spun on the main thread, and a clean shutd
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import os
+import sys
 from collections.abc import Callable, Iterator
 from typing import Any, TypeVar
 
@@ -12,6 +14,26 @@ from ..physics.parameters import ParameterError
 from . import CommandError
 
 N = TypeVar('N')
+
+
+def add_namespace_option(parser: argparse.ArgumentParser) -> None:
+    """``--namespace NS``: run the nodes under ``/NS`` so that several feeders share one ROS graph."""
+    parser.add_argument('--namespace', metavar='NS', default='/',
+                        help='ROS namespace of every node, topic and service of this feeder (e.g. feeder1 -> '
+                             '/feeder1/particle/pose, /feeder1/simulator/step); in a namespace the simulator '
+                             'does not publish /clock, so several feeders can share a graph (docs/interface.md)')
+
+
+def namespace(text: str) -> str:
+    """``feeder1`` or ``/feeder1`` -> ``/feeder1``, checked by ROS's rules; raises :class:`CommandError`."""
+    from rclpy.exceptions import InvalidNamespaceException
+    from rclpy.validate_namespace import validate_namespace
+    ns = '/' + text.strip('/')
+    try:
+        validate_namespace(ns)
+    except InvalidNamespaceException as err:
+        raise CommandError(f'--namespace {text!r} is not a valid ROS namespace: {err}') from err
+    return ns
 
 
 def validate(flat: dict[str, Any], controller: bool = False) -> None:
@@ -32,9 +54,10 @@ def validate(flat: dict[str, Any], controller: bool = False) -> None:
 class RosSession:
     """What a command builds its nodes with; see :func:`ros_session`."""
 
-    def __init__(self, context: Any, stop: Any, record: str | None, viewer: Any = None):
+    def __init__(self, context: Any, stop: Any, record: str | None, namespace: str = '/', viewer: Any = None):
         self.context = context
         self.stop = stop
+        self.namespace = namespace
         self.viewer = viewer    # a micro_feeder.viz Viewer (--foxglove): forwards what the nodes publish
         self.nodes: list[Any] = []
         self.recorder = None
@@ -43,14 +66,16 @@ class RosSession:
             from rclpy.parameter import Parameter
 
             from ..nodes.recorder import Recorder
-            self.recorder = self.add(lambda: Recorder(context=context,
+            self.recorder = self.add(lambda: Recorder(context=context, namespace=namespace,
                                                       parameter_overrides=[Parameter('output', value=record)]))
 
     def add(self, build: Callable[[], N]) -> N:
-        """Build a node (a refused parameter becomes a :class:`CommandError`) and include it in the spin."""
+        """Build a node (a refused parameter becomes a :class:`CommandError`) and include it in the spin.
+        Build it with ``namespace=session.namespace`` (``--namespace``)."""
+        from ..physics.dynamics import SimulationError
         try:
             node = build()
-        except (ParameterError, ValueError, FileExistsError) as err:
+        except (ParameterError, ValueError, FileExistsError, SimulationError) as err:
             raise CommandError(str(err)) from err
         self.nodes.append(node)
         if self.viewer is not None:
@@ -80,10 +105,13 @@ class RosSession:
 
 
 @contextlib.contextmanager
-def ros_session(record: str | None = None, viewer: Any = None) -> Iterator[RosSession]:
-    """A :class:`RosSession`; ROS traffic stays on this host unless ROS_AUTOMATIC_DISCOVERY_RANGE is set.
+def ros_session(record: str | None = None, namespace: str = '/', viewer: Any = None) -> Iterator[RosSession]:
+    """A :class:`RosSession` whose nodes go in ``namespace``; ROS traffic stays on this host unless
+    ROS_AUTOMATIC_DISCOVERY_RANGE is set. The process gets the simulator loop's GIL switch interval.
     ``viewer`` (``cli._foxglove.live_view``) is given every node built."""
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    from ..realtime.loop import GIL_SWITCH_INTERVAL
+    sys.setswitchinterval(GIL_SWITCH_INTERVAL)
     import rclpy  # after the environment is set: rcl reads it at init
     from rclpy.context import Context
     from rclpy.signals import SignalHandlerOptions
@@ -94,7 +122,7 @@ def ros_session(record: str | None = None, viewer: Any = None) -> Iterator[RosSe
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     session = None
     try:
-        session = RosSession(context, StopFlag().install(), record, viewer)
+        session = RosSession(context, StopFlag().install(), record, namespace, viewer)
         yield session
     finally:
         if session is not None:

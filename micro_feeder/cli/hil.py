@@ -15,7 +15,7 @@ from typing import Any
 from . import CommandError
 from ._common import add_model_options, settings_from_args
 from ._foxglove import add_foxglove_option, live_view
-from ._session import ros_session, validate
+from ._session import add_namespace_option, namespace, ros_session, validate
 
 # With --record, the controller starts once the recorder subscribes to these (so the log holds every state).
 RECORDED_BEFORE_START = ('particle/pose', 'particle/twist', 'actuator/trajectory', 'simulator/command_receipts')
@@ -35,6 +35,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument('--record', metavar='PATH', help='record every topic to this log (docs/logs.md)')
     parser.add_argument('--json', action='store_true', help='print one JSON object and nothing else')
     add_foxglove_option(parser)
+    add_namespace_option(parser)
     parser.set_defaults(func=run)
 
 
@@ -42,18 +43,19 @@ def run(args: argparse.Namespace) -> int:
     flat = settings_from_args(args)
     if not args.timeout > 0:
         raise CommandError('--timeout must be > 0')
+    ns = namespace(args.namespace)
     validate(flat, controller=True)      # before the recorder creates the log
-    with live_view(args.foxglove) as viewer, ros_session(args.record, viewer) as session:
+    with live_view(args.foxglove) as viewer, ros_session(args.record, ns, viewer) as session:
         from ..nodes.feed_controller import FeedController
         from ..nodes.simulator import Simulator
 
-        sim = session.add(lambda: Simulator(context=session.context,
+        sim = session.add(lambda: Simulator(context=session.context, namespace=ns,
                                             overrides={**flat, 'lockstep': args.lockstep}))
+        end = sim.stop_at(args.timeout)     # at once: sim time runs while the other nodes are built
         if session.recorder is not None:     # the log starts before the loop does
             session.spin(lambda: all(sim.count_subscribers(topic) > 0 for topic in RECORDED_BEFORE_START))
-        controller = session.add(lambda: FeedController(context=session.context,
+        controller = session.add(lambda: FeedController(context=session.context, namespace=ns,
                                                         overrides={**flat, 'lockstep': args.lockstep}))
-        end = sim.stop_at(args.timeout)
         start = time.perf_counter()
         session.spin(lambda: controller.done or bool(sim.error), end)
         wall = time.perf_counter() - start

@@ -15,7 +15,7 @@ from typing import Any, TextIO
 from . import CommandError
 from ._common import add_model_options, settings_from_args
 from ._foxglove import add_foxglove_option, live_view
-from ._session import ros_session, validate
+from ._session import add_namespace_option, namespace, ros_session, validate
 
 STATUS_PERIOD = 0.2   # s (wall clock) between two status line updates
 
@@ -34,6 +34,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument('--record', metavar='PATH',
                         help='record every topic to this log (rosbag2 directory with MCAP, see docs/logs.md)')
     add_foxglove_option(parser)
+    add_namespace_option(parser)
     parser.set_defaults(func=run)
 
 
@@ -65,18 +66,19 @@ def run(args: argparse.Namespace) -> int:
     flat = settings_from_args(args)
     if args.duration is not None and not args.duration > 0:
         raise CommandError('--duration must be > 0')
+    ns = namespace(args.namespace)
     validate(flat)      # before the recorder creates the log
-    with live_view(args.foxglove) as viewer, ros_session(args.record, viewer) as session:
+    with live_view(args.foxglove) as viewer, ros_session(args.record, ns, viewer) as session:
         from ..nodes.actuator import Actuator
         from ..nodes.simulator import Simulator
 
-        sim = session.add(lambda: Simulator(context=session.context,
+        sim = session.add(lambda: Simulator(context=session.context, namespace=ns,
                                             overrides={**flat, 'real_time_factor': args.real_time_factor}))
-        actuator = session.add(lambda: Actuator(context=session.context, overrides=flat))
+        end = sim.stop_at(args.duration) if args.duration is not None else None   # before the actuator is built
+        actuator = session.add(lambda: Actuator(context=session.context, namespace=ns, overrides=flat))
         tty: TextIO | None = sys.stderr if sys.stderr.isatty() else None
         if tty is not None:
             sim.create_timer(STATUS_PERIOD, lambda: print('\r' + status_line(sim), end='', file=tty, flush=True))
-        end = sim.stop_at(args.duration) if args.duration is not None else None
         start = time.perf_counter()
         session.spin(lambda: bool(sim.error), end)
         wall = time.perf_counter() - start

@@ -80,6 +80,13 @@ def spin_until(executor: Executor, done: Callable[[], bool], future: Future | No
         executor.spin_until_future_complete(future, timeout_sec=SPIN_SLICE)
 
 
+def status_name(node: Any, what: str) -> str:
+    """A ``/diagnostics`` status name that stays unique with several feeders on one graph: the node's
+    fully qualified name without the leading slash, then ``what`` (``simulator: loop``,
+    ``feeder1/simulator: loop``)."""
+    return f'{node.get_fully_qualified_name().lstrip("/")}: {what}'
+
+
 def topic_qos(name: str, min_depth: int = 0) -> QoSProfile:
     """The QoS of a topic of DESIGN.md §3 (relative name, e.g. ``particle/pose``) from the shared table
     (logs/topics.py), with a history at least ``min_depth`` deep."""
@@ -87,3 +94,8 @@ def topic_qos(name: str, min_depth: int = 0) -> QoSProfile:
     reliability = ReliabilityPolicy.RELIABLE if spec.reliable else ReliabilityPolicy.BEST_EFFORT
     durability = DurabilityPolicy.TRANSIENT_LOCAL if spec.transient_local else DurabilityPolicy.VOLATILE
     return QoSProfile(depth=max(spec.depth, min_depth), reliability=reliability, durability=durability)
+
+
+# Services: requests queued deep enough for bursts (200 asynchronous ~/step calls all answered; the
+# rclpy default keeps 10 and silently drops the rest). Clients sending bursts need the same depth.
+SERVICE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)

@@ -4,7 +4,7 @@ It is a controller under test, as a lab would write one: it sees only the simula
 (``particle/pose``, ``particle/twist``) and commands ``actuator/trajectory``, using sim time. Whenever the
 part rests (ẋ = ż = 0 on a still surface, at least ``settle_time`` after the last burst ended) it asks the
 :class:`~micro_feeder.control.feed_planner.FeedPlanner` for the next burst, until the part rests within
-``feed.tolerance`` of the target. The outcome goes on the latched ``feed_controller/status`` and on
+``feed.tolerance`` of the target. The outcome goes on the latched ``~/status`` and on
 ``/diagnostics``.
 
 Decisions use only a pose and a twist with the same stamp, so they depend on the sim state alone and not
@@ -37,7 +37,7 @@ from ..control.feed_planner import Burst, FeedGoal, FeedPlanner
 from ..physics.parameters import ParamSpec
 from ..physics.waveforms import StrokeParams
 from . import messages
-from ._ros import topic_qos
+from ._ros import status_name, topic_qos
 from .actuator import sample_waveform
 from .commands import joint_names
 from .parameters import declare, model_specs, values
@@ -82,7 +82,7 @@ class FeedController(Node):
 
         self._pub_trajectory = self.create_publisher(JointTrajectory, 'actuator/trajectory',
                                                      topic_qos('actuator/trajectory'))
-        self._pub_status = self.create_publisher(String, 'feed_controller/status', STATUS_QOS)
+        self._pub_status = self.create_publisher(String, '~/status', STATUS_QOS)
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', topic_qos('/diagnostics'))
         self.create_subscription(PoseStamped, 'particle/pose', self._on_pose, topic_qos('particle/pose'))
         self.create_subscription(TwistStamped, 'particle/twist', self._on_twist, topic_qos('particle/twist'))
@@ -214,7 +214,7 @@ class FeedController(Node):
     def _publish_diagnostics(self) -> None:
         level = {'reached': DiagnosticStatus.OK, 'running': DiagnosticStatus.OK}.get(self.planner.status,
                                                                                     DiagnosticStatus.ERROR)
-        status = DiagnosticStatus(name=f'{self.get_name()}: feed', hardware_id='micro_feeder', level=level,
+        status = DiagnosticStatus(name=status_name(self, 'feed'), hardware_id='micro_feeder', level=level,
                                   message=self.status_text(),
                                   values=[KeyValue(key=k, value=str(v)) for k, v in self.result().items()])
         self._pub_diag.publish(DiagnosticArray(header=Header(stamp=messages.to_time(self.last_t)),

@@ -10,6 +10,7 @@ node's on-set callback refuses a value with :func:`check_changes`, which applies
 
 from __future__ import annotations
 
+import difflib
 import sys
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
@@ -21,7 +22,7 @@ from rclpy.parameter import Parameter
 from ..physics.parameters import ParameterError, ParameterGroup, ParamSpec, all_specs
 from ..physics.surface import SurfaceParams
 from ..physics.waveforms import StrokeParams, waveform_table
-from ..settings import PARAMETER_GROUPS
+from ..settings import PARAMETER_GROUPS, known_parameters
 
 # Every model parameter group (the namespace of config/feeder.yaml and --set).
 MODEL_GROUPS: tuple[type[ParameterGroup], ...] = tuple(PARAMETER_GROUPS)
@@ -82,6 +83,7 @@ def declare(node: Node, table: SpecTable, overrides: Mapping[str, Any] | None = 
     parameters are converted first. Raises :class:`ParameterError` for a value the spec refuses.
     """
     ros_overrides = node._parameter_overrides   # rclpy keeps --ros-args values here; typed on declare
+    refuse_unknown({name: p.value for name, p in ros_overrides.items()}, table)
     for name, (spec, default) in table.items():
         if overrides is not None and name in overrides:
             value = overrides[name]
@@ -93,6 +95,19 @@ def declare(node: Node, table: SpecTable, overrides: Mapping[str, Any] | None = 
         checked = spec.check(name, value)
         value = list(checked) if isinstance(checked, tuple) else checked
         node.declare_parameter(name, value, descriptor(name, spec), ignore_override=True)
+
+
+def refuse_unknown(given: Mapping[str, Any], table: SpecTable) -> None:
+    """Raise :class:`ParameterError` for a name in a model or controller namespace (``contact.``,
+    ``feed.`` ...) that no micro_feeder node knows, e.g. the typo ``contact.sigmaa``, with the closest
+    known names; as ``--set`` does. Other names may belong to other nodes of a shared file and are left."""
+    known = {*known_parameters(), *table}
+    namespaces = {name.split('.')[0] for name in known if '.' in name}
+    for name, value in given.items():
+        if name not in known and name.split('.')[0] in namespaces and '.' in name:
+            close = difflib.get_close_matches(name, known, n=3)
+            raise ParameterError(name, value, 'unknown parameter' + (
+                f'; did you mean {", ".join(close)}?' if close else '; see docs/parameters.md'))
 
 
 def values(node: Node, names: Iterable[str]) -> dict[str, Any]:

@@ -12,8 +12,8 @@ log summary on a clean stop. rclpy's EventsExecutor cannot deliver message info 
 a callback (``SystemError`` in rclpy 9.1.2), so gaps in a publisher's sequence are not counted.
 
 Use as a program (``recorder --ros-args -p output:=out/run1``: stops cleanly on SIGINT, SIGTERM or the
-``recorder/stop`` service) or in-process: ``r = Recorder(context=ctx)``, add it to an executor that
-runs on the main thread, spin, then ``r.close()``.
+``~/stop`` service, ``/recorder/stop`` by default) or in-process: ``r = Recorder(context=ctx)``, add it to
+an executor that runs on the main thread, spin, then ``r.close()``.
 """
 
 from __future__ import annotations
@@ -33,7 +33,6 @@ from rclpy.exceptions import ParameterException
 from rclpy.experimental import EventsExecutor
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from std_srvs.srv import Trigger
 
@@ -42,7 +41,8 @@ from ..logs.reader import LogReader
 from ..logs.summary import format_summary, summarize
 from ..logs.topics import TOPICS, TOPICS_BY_NAME
 from ..logs.writer import LogWriter
-from ._ros import StopFlag, message_class, qos_to_dict, spin_until, topic_qos
+from ._ros import SERVICE_QOS, message_class, qos_to_dict, spin_until, topic_qos
+from .spin import init_ros
 
 SUBSCRIPTION_DEPTH = 1000  # messages queued per topic while the writer is busy
 DIAGNOSTICS_PERIOD = 1.0  # s
@@ -59,6 +59,12 @@ def _descriptor(description: str, type_: int, *, float_range: tuple[float, float
     return d
 
 
+def default_topics(namespace: str) -> list[str]:
+    """Every micro_feeder topic; without ``/clock`` in a namespace (a namespaced simulator does not
+    publish it, so the ``/clock`` there would be another feeder's)."""
+    return [spec.name for spec in TOPICS if namespace == '/' or spec.name != '/clock']
+
+
 class Recorder(Node):
     """Records topics to an MCAP log; see the module docstring."""
 
@@ -70,8 +76,10 @@ class Recorder(Node):
         self.declare_parameter('output', '', _descriptor(
             'log directory to create (rosbag2 layout), or a file name ending in .mcap; '
             'empty = ./rosbag2_<date>-<time>', ParameterType.PARAMETER_STRING))
-        self.declare_parameter('topics', [spec.name for spec in TOPICS], _descriptor(
-            'topics to record, relative names resolved in the node namespace', ParameterType.PARAMETER_STRING_ARRAY))
+        self.declare_parameter('topics', default_topics(self.get_namespace()), _descriptor(
+            'topics to record, relative names resolved in the node namespace (default: every micro_feeder topic; '
+            'in a namespace other than /, not /clock, which belongs to the un-namespaced feeder)',
+            ParameterType.PARAMETER_STRING_ARRAY))
         self.declare_parameter('flush_period', 1.0, _descriptor(
             'longest time [s] between two flushes to disk: what a crash can lose', ParameterType.PARAMETER_DOUBLE,
             float_range=(0.01, 60.0)))
@@ -104,7 +112,7 @@ class Recorder(Node):
         self.create_timer(min(p['flush_period'] / 2, 0.25), self._flush_if_due)
         if self._pending:
             self.create_timer(DISCOVERY_PERIOD, self._discover)
-        self.create_service(Trigger, 'recorder/stop', self._on_stop)
+        self.create_service(Trigger, '~/stop', self._on_stop, qos_profile=SERVICE_QOS)
         self.get_logger().info(f'recording {len(p["topics"])} topics to {self.writer.path}')
 
     # -- subscriptions --------------------------------------------------------------------------------
@@ -189,10 +197,11 @@ class Recorder(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Console script ``recorder``: record until SIGINT, SIGTERM or ``recorder/stop``, then print the
+    """Console script ``recorder``: record until SIGINT, SIGTERM or ``~/stop``, then print the
     log summary."""
-    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    stop = StopFlag().install()
+    stop = init_ros('recorder', args)
+    if stop is None:
+        return 2
     try:
         node = Recorder()
     except (ValueError, OSError, ParameterException) as err:

@@ -23,8 +23,11 @@ def jit(function: F) -> F:
     ``_nrt=False`` compiles without numba's reference counting: kernel functions never allocate
     (callers pass work arrays), and the atomic reference-count updates on every array view and tuple
     unpacking otherwise cost ~100 ns per call, 5-7x the arithmetic (measured in docs/dynamics.md).
+    ``nogil=True`` releases the GIL while compiled code runs: the simulator node's loop thread then
+    integrates while its executor thread serves commands and services, and a long integration no longer
+    keeps the main thread from answering Ctrl-C/SIGTERM.
     """
-    return numba.njit(cache=True, error_model='numpy', _nrt=False)(function)
+    return numba.njit(cache=True, error_model='numpy', _nrt=False, nogil=True)(function)
 
 
 def jit_inline(function: F) -> F:
@@ -33,4 +36,4 @@ def jit_inline(function: F) -> F:
     Each call otherwise passes the model and stroke-table tuples (dozens of machine words) by value;
     inlining halves the cost of one right-hand-side evaluation (115 -> 53 ns, docs/dynamics.md).
     """
-    return numba.njit(cache=True, error_model='numpy', _nrt=False, inline='always')(function)
+    return numba.njit(cache=True, error_model='numpy', _nrt=False, nogil=True, inline='always')(function)

@@ -1,5 +1,5 @@
-"""Figures of offline runs: one run's history (strokes, velocity, friction, displacement, height, mode) and
-the sweep; the panel helpers are shared with the log plot (logs/plot.py)."""
+"""Figures of offline runs: one run's history (strokes, velocity, friction, displacement, height, mode); the
+panel helpers are shared with the log plot (logs/plot.py)."""
 
 from __future__ import annotations
 
@@ -9,6 +9,7 @@ import matplotlib
 
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt
+import numpy as np
 
 from ..physics.dynamics import MODES, RunResult
 from .units import scale

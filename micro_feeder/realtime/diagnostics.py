@@ -1,0 +1,78 @@
+"""The simulator's ``/diagnostics`` status as a side-effect-free function of a snapshot of its state."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+
+OK, WARN, ERROR = 0, 1, 2       # diagnostic_msgs/DiagnosticStatus levels
+LAGGING = 0.95                  # achieved / target real-time factor below which the loop is behind
+WEDGED_S = 1.0                  # s: a tick working longer than this is reported as stuck
+
+
+@dataclass(frozen=True)
+class LoopSnapshot:
+    """What the status is computed from. Times in s; ``periods_ms``/``busy_ms`` since the last report."""
+
+    sim_time: float
+    mode: str
+    paused: bool
+    lockstep: bool
+    error: str
+    rtf_target: float
+    achieved_rtf: float
+    publish_rate: float
+    periods_ms: np.ndarray
+    busy_ms: np.ndarray
+    overruns: int
+    tick_age: float
+    steps_granted: int
+    states_published: int
+    pending_reset: bool
+    transitions: Mapping[str, int]
+    intake: Mapping[str, str]
+
+
+@dataclass(frozen=True)
+class LoopStatus:
+    level: int
+    message: str
+    values: dict[str, str]
+
+
+def achieved_rtf(wall: tuple[float, float], sim: tuple[float, float]) -> float:
+    """Sim seconds (or any count) per wall second between two readings; 0 over no wall time."""
+    return (sim[1] - sim[0]) / (wall[1] - wall[0]) if wall[1] > wall[0] else 0.0
+
+
+def _pct(a: np.ndarray, q: float) -> str:
+    return f'{np.percentile(a, q):.3f}' if a.size else 'nan'
+
+
+def loop_status(s: LoopSnapshot) -> LoopStatus:
+    """Level, message and key/values of the ``simulator: loop`` status (docs/interface.md)."""
+    lagging = not s.paused and s.rtf_target > 0 and s.achieved_rtf < LAGGING * s.rtf_target
+    wedged = s.tick_age > WEDGED_S
+    if s.error:
+        level, message = ERROR, s.error
+    elif wedged:
+        level, message = ERROR, (f'one tick has been working for {s.tick_age:.1f} s: the physics cannot advance '
+                                 'in bounded time with these parameters (see integration.*)')
+    elif lagging:
+        level, message = WARN, 'behind real time: the physics cannot keep up'
+    else:
+        level = OK
+        message = 'lockstep' if s.lockstep else 'paused' if s.paused else 'running'
+    values = {'sim_time_s': f'{s.sim_time:.9f}', 'mode': s.mode, 'paused': str(s.paused),
+              'real_time_factor_target': f'{s.rtf_target:g}', 'real_time_factor_achieved': f'{s.achieved_rtf:.4f}',
+              'publish_rate_achieved': f'{s.publish_rate:.1f}',
+              'tick_period_p50_ms': _pct(s.periods_ms, 50), 'tick_period_p99_ms': _pct(s.periods_ms, 99),
+              'tick_compute_p99_ms': _pct(s.busy_ms, 99), 'overruns': str(s.overruns),
+              'tick_in_progress_s': f'{s.tick_age:.3f}',
+              'lockstep': str(s.lockstep), 'steps_granted': str(s.steps_granted),
+              'states_published': str(s.states_published),
+              **s.intake, 'model_parameters_pending_reset': str(s.pending_reset)}
+    values.update({k: str(v) for k, v in s.transitions.items()})
+    return LoopStatus(level, message, values)

@@ -1,0 +1,121 @@
+"""The simulator's rclpy-free parts: command coalescing, throttled refusal lines, the intake's bounds and
+threads, the loop's grid and pause, the diagnostics function."""
+
+from __future__ import annotations
+
+import threading
+import time
+
+import numpy as np
+import pytest
+from ros_helpers import wait_until
+
+from micro_feeder.nodes.commands import start_time
+from micro_feeder.realtime.diagnostics import ERROR, OK, WARN, LoopSnapshot, loop_status
+from micro_feeder.realtime.intake import CommandIntake, Received, ThrottledLog, plan
+from micro_feeder.realtime.loop import TickLoop
+
+
+def _parse(received: Received) -> str:
+    if received.data == b'bad':
+        raise ValueError('bad command')
+    return received.data.decode()
+
+
+def test_a_later_valid_command_starting_no_later_supersedes_unparsed() -> None:
+    parsed: list[bytes] = []
+
+    def parse(r: Received) -> str:
+        parsed.append(r.data)
+        return _parse(r)
+
+    batch = [Received('actuator/trajectory', b'a', 0.0),          # starts now (t = 1): superseded by c
+             Received('actuator/trajectory', b'b', 5.0),          # starts at 5: superseded by c (starts earlier)
+             Received('actuator/command', b'c', 0.0),             # valid, starts now
+             Received('actuator/trajectory', b'd', 3.0),          # starts later than c: kept
+             Received('actuator/command', b'bad', 0.0)]           # invalid: refused, supersedes nothing
+    outcomes = plan(batch, 1.0, start_time, parse)
+    assert [o.coalesced for o in outcomes] == [True, True, False, False, False]
+    assert [o.command for o in outcomes] == [None, None, 'c', 'd', None]
+    assert outcomes[4].refused == 'bad command'
+    assert parsed == [b'bad', b'd', b'c']         # newest first, the superseded never parsed
+    no_coalescing = plan(batch, 1.0, start_time, _parse, coalesce=False)
+    assert [o.command for o in no_coalescing] == ['a', 'b', 'c', 'd', None]
+
+
+def test_refusals_are_logged_first_then_summarised_per_period() -> None:
+    now = [0.0]
+    log = ThrottledLog(period=5.0, clock=lambda: now[0])
+    assert log.note('nan') == 'command rejected: nan'
+    lines = [log.note(f'nan {i}') for i in range(1000)]
+    assert lines == [None] * 1000 and log.flush() is None
+    now[0] = 5.0
+    assert log.flush() == '1000 commands rejected in the last 5 s; last: nan 999'
+    assert log.flush() is None
+
+
+def test_intake_refuses_oversized_drops_oldest_and_processes_on_its_thread() -> None:
+    batches: list[list[Received]] = []
+    threads: set[str] = set()
+
+    def process(batch: list[Received]) -> None:
+        threads.add(threading.current_thread().name)
+        batches.append(batch)
+
+    paused = [True]
+    intake = CommandIntake(process, lambda: paused[0], max_message_bytes=10, max_queued_bytes=20)
+    try:
+        intake.submit(Received('actuator/command', b'x' * 11, 0.0))
+        assert batches[-1][0].refused.startswith('actuator/command: message of 11 B over max_command_bytes')
+        assert threads == {threading.current_thread().name}        # paused: processed at once, here
+        with intake.busy:                                            # hold the worker off: three queue up
+            paused[0] = False
+            for data in (b'a' * 10, b'b' * 10, b'c' * 10):
+                intake.submit(Received('actuator/command', data, 0.0))
+        wait_until(lambda: len(batches) == 2, 5, what='the worker to take the batch')
+        assert [r.data for r in batches[1]] == [None, b'b' * 10, b'c' * 10] and intake.dropped == 1
+        assert 'simulator-intake' in threads
+    finally:
+        intake.stop()
+
+
+def test_loop_ticks_on_its_thread_pauses_and_stops() -> None:
+    ticks: list[float] = []
+    loop = TickLoop(0.002, ticks.append, lambda err: None, name='test-loop')
+    try:
+        time.sleep(0.02)
+        assert not ticks                         # starts paused
+        loop.resume()
+        wait_until(lambda: len(ticks) >= 20, 5, what='20 ticks')
+        loop.pause()
+        time.sleep(0.01)
+        n = len(ticks)
+        time.sleep(0.02)
+        assert len(ticks) == n
+        assert np.median(ticks) == pytest.approx(0.002, rel=0.5)
+        periods, busy = loop.timing.drain()
+        assert periods.size == busy.size >= 20
+    finally:
+        assert loop.stop(timeout=1.0)
+
+
+def _snapshot(**changes: object) -> LoopSnapshot:
+    base = dict(sim_time=1.5, mode='stuck', paused=False, lockstep=False, error='', rtf_target=1.0,
+                achieved_rtf=1.0, publish_rate=1000.0, periods_ms=np.array([1.0, 1.0, 2.0]),
+                busy_ms=np.array([0.1, 0.2, 0.3]), overruns=0, tick_age=0.0, steps_granted=0, states_published=1500,
+                pending_reset=False, transitions={'stick_to_slip': 2}, intake={'rejected_commands': '3'})
+    base.update(changes)
+    return LoopSnapshot(**base)
+
+
+def test_loop_status_levels_and_values() -> None:
+    ok = loop_status(_snapshot())
+    assert (ok.level, ok.message) == (OK, 'running')
+    assert ok.values['tick_period_p50_ms'] == '1.000' and ok.values['rejected_commands'] == '3'
+    assert ok.values['stick_to_slip'] == '2' and ok.values['publish_rate_achieved'] == '1000.0'
+    assert loop_status(_snapshot(achieved_rtf=0.9)).level == WARN
+    assert loop_status(_snapshot(achieved_rtf=0.9, paused=True)).level == OK
+    wedged = loop_status(_snapshot(tick_age=3.0))
+    assert wedged.level == ERROR and 'one tick has been working for 3.0 s' in wedged.message
+    assert loop_status(_snapshot(error='SimulationError: x')).message == 'SimulationError: x'
+    assert loop_status(_snapshot(periods_ms=np.zeros(0))).values['tick_period_p99_ms'] == 'nan'

@@ -1,0 +1,99 @@
+"""Every node executable answers SIGINT and SIGTERM within 1 s, without a traceback: once running, during
+its imports, and with a tick stuck in the physics."""
+
+from __future__ import annotations
+
+import signal
+import time
+from pathlib import Path
+
+import pytest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from node_helpers import start_process, stop_process
+from rcl_interfaces.srv import SetParameters
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from ros_helpers import wait_until
+from std_srvs.srv import SetBool, Trigger
+
+from micro_feeder.nodes._ros import topic_qos
+
+NODES = ['simulator', 'actuator', 'recorder', 'feed_controller']
+ANSWER_S = 1.0
+
+
+def _start(name: str, tmp_path: Path) -> object:
+    extra = ('-p', f'output:={tmp_path / "log"}') if name == 'recorder' else ()
+    return start_process(name, *extra)
+
+
+def _answer_time(proc, sig: int) -> float:
+    start = time.monotonic()
+    proc.send_signal(sig)
+    try:
+        proc.wait(timeout=10)
+    finally:
+        elapsed = time.monotonic() - start
+    return elapsed
+
+
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
+@pytest.mark.parametrize('name', NODES)
+def test_a_running_node_stops_within_a_second(ros_context: Context, tmp_path: Path, name: str, sig: int) -> None:
+    proc = _start(name, tmp_path)
+    graph = Node('graph', context=ros_context)
+    try:
+        wait_until(lambda: name in graph.get_node_names(), 120, what=f'{name} in the graph')
+        elapsed = _answer_time(proc, sig)
+    finally:
+        graph.destroy_node()
+        code, out = stop_process(proc)
+    assert elapsed <= ANSWER_S and code == 0, f'{elapsed:.2f} s, status {code}:\n{out}'
+    assert 'Traceback' not in out, out
+
+
+@pytest.mark.parametrize('name', NODES)
+def test_ctrl_c_during_start_up_is_quiet(tmp_path: Path, name: str) -> None:
+    proc = _start(name, tmp_path)
+    time.sleep(0.3)                 # still importing
+    elapsed = _answer_time(proc, signal.SIGINT)
+    _, out = stop_process(proc)
+    assert elapsed <= ANSWER_S and 'Traceback' not in out and 'KeyboardInterrupt' not in out, out
+
+
+def test_sigterm_is_answered_while_a_tick_is_stuck_in_the_physics(ros_context: Context) -> None:
+    """A legal but extreme integration.check_step applied by ~/reset makes one tick take minutes: services
+    answer 'busy', /diagnostics says so, and SIGTERM still ends the process within a second."""
+    proc = start_process('simulator')
+    client = Node('client', context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(client)
+    reports: list[DiagnosticArray] = []
+    client.create_subscription(DiagnosticArray, '/diagnostics', reports.append, topic_qos('/diagnostics'))
+
+    def call(srv_type: type, name: str, request: object) -> object:
+        service = client.create_client(srv_type, name)
+        wait_until(service.service_is_ready, 120, executor=executor, what=name)
+        future = service.call_async(request)
+        wait_until(future.done, 10, executor=executor, what=f'answer of {name}')
+        return future.result()
+
+    try:
+        param = Parameter('integration.check_step', value=1e-13).to_parameter_msg()
+        (result,) = call(SetParameters, 'simulator/set_parameters', SetParameters.Request(parameters=[param])).results
+        assert result.successful
+        assert call(Trigger, 'simulator/reset', Trigger.Request()).success
+        wait_until(lambda: any(s.level == DiagnosticStatus.ERROR and 'one tick has been working' in s.message
+                               for d in reports for s in d.status), 10, executor=executor,
+                   what='/diagnostics reporting the stuck tick')
+        answer = call(SetBool, 'simulator/pause', SetBool.Request(data=True))
+        assert not answer.success and answer.message.startswith('busy'), answer.message
+        elapsed = _answer_time(proc, signal.SIGTERM)
+    finally:
+        executor.shutdown()
+        client.destroy_node()
+        code, out = stop_process(proc)
+    assert elapsed <= ANSWER_S and code == 0, f'{elapsed:.2f} s, status {code}:\n{out}'
+    assert 'Traceback' not in out, out
