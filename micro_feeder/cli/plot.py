@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from . import CommandError
-from ._logs import open_log
+from ._logs import open_log, report_loss
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -26,4 +26,5 @@ def run(args: argparse.Namespace) -> int:
     except OSError as err:
         raise CommandError(f'cannot write {args.output}: {err}') from None
     print(f'wrote {path}')
+    report_loss(log)
     return 0

@@ -8,7 +8,7 @@ import json
 from ..settings import parse_override
 from . import CommandError
 from ._common import add_model_options, settings_from_args
-from ._logs import open_log
+from ._logs import open_log, report_loss
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -52,6 +52,7 @@ def run(args: argparse.Namespace) -> int:
         print(report.verdict())
         for note in report.notes:
             print(f'  note: {note}')
+    report_loss(log)
     if args.tolerance is not None and not report.max_error <= args.tolerance:
         return 1
     return 0

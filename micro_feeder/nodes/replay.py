@@ -94,6 +94,7 @@ class Replay(Node):
         self.timing_max = float('-inf')  # over the whole run [s]
         self.published = 0
         self.error: str | None = None  # why the replay stopped early (a pass had nothing to publish)
+        self.failure: str | None = None  # why the player thread died (a bug or an unreadable log)
         self._start_offset = p['start_offset']
         self.finished = Future()
         self.playback_ns = self.start_ns
@@ -121,6 +122,14 @@ class Replay(Node):
         self._thread.start()
 
     def _play(self) -> None:
+        try:
+            self._play_passes()
+        except Exception as err:  # a dead player must not leave the process idling: report and end
+            self.failure = f'the player stopped: {type(err).__name__}: {err}'
+        if not self.finished.done():
+            self.finished.set_result(self.failure is None)
+
+    def _play_passes(self) -> None:
         while not self._stop.is_set():
             origin = time.monotonic()
             with self._lock:
@@ -145,7 +154,6 @@ class Replay(Node):
                 break
             if not self.loop:
                 break
-        self.finished.set_result(True)
 
     def _wait_until(self, due: float) -> bool:
         """Sleep until ``due`` (+ time spent paused); False when stopped."""
@@ -222,6 +230,9 @@ def main(args: list[str] | None = None) -> int:
     if node.error:
         print(f'replay: error: {node.error}', file=sys.stderr)
         return 2
+    if node.failure:
+        print(f'replay: error: {node.failure}', file=sys.stderr)
+        return 1
     return 0
 
 

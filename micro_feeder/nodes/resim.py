@@ -170,15 +170,15 @@ def _first_segment(items: list[tuple[int, Any]]) -> tuple[list[tuple[int, Any]],
 def _commands(log: LogReader, pose_log: list[tuple[int, int]], notes: list[str]) -> tuple[list[_Command], str]:
     """The commands of the log in receipt order, paired with their receipt sim times [ns]."""
     recorded: dict[str, list[LogMessage]] = defaultdict(list)
-    for m in log.messages(COMMAND_TOPICS):
+    for m in log.messages(COMMAND_TOPICS, decoded=True):
         recorded[next(t for t in COMMAND_TOPICS if m.topic.endswith(t))].append(m)
     if log.resolve('simulator/command_receipts') is None:
         if recorded:
             notes.append('the log has no simulator/command_receipts (recorded by an older simulator): receipt '
                          'times estimated from the last pose recorded before each command, ambiguous by a tick')
         return _estimated(recorded, pose_log), 'estimated'
-    receipts, reset = _first_segment([(m.message.stamp.sec * 1_000_000_000 + m.message.stamp.nanosec,
-                                       m.message.frame_id) for m in log.messages(['simulator/command_receipts'])])
+    receipts, reset = _first_segment([(m.stamp_ns, m.message.frame_id)
+                                      for m in log.messages(['simulator/command_receipts'], decoded=True)])
     queues = {topic: iter(msgs) for topic, msgs in recorded.items()}
     out, missing = [], 0
     for ns, topic in receipts:
@@ -255,9 +255,9 @@ def resimulate(log: LogReader, overrides: Mapping[str, Any] | None = None) -> Re
     except ValueError as err:
         raise ResimError(f'the parameters build no model: {err}') from err
 
-    pose_msgs = list(log.messages(['particle/pose']))
-    pose_log = [(m.log_time_ns, m.publish_time_ns) for m in pose_msgs]
-    poses, reset = _first_segment([(m.publish_time_ns, m) for m in pose_msgs])
+    pose_msgs = list(log.messages(['particle/pose'], decoded=True))
+    pose_log = [(m.log_time_ns, m.stamp_ns or 0) for m in pose_msgs]
+    poses, reset = _first_segment([(m.stamp_ns or 0, m) for m in pose_msgs])
     if not poses:
         raise ResimError('the log has no particle/pose to compare with')
     if reset:
