@@ -6,6 +6,10 @@ from pathlib import Path
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
+from mcap.data_stream import ReadDataStream
+from mcap.reader import make_reader
+from mcap.records import Chunk, Message
+from mcap.stream_reader import breakup_chunk
 from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray, String
@@ -81,3 +85,16 @@ def write_motion_log(path: Path, n: int = 300, period_ns: int = 1_000_000, **wri
             writer.write('/particle/contact_state', serialize_message(String(data=MODES[i // 100 % 3])), t + 3)
     writer.close()
     return poses
+
+
+def chunks_of(path: Path) -> list[tuple[int, int, list[bytes]]]:
+    """(start offset, end offset, message bytes) of every chunk of a complete file, as the mcap library
+    (not our reader) reads them."""
+    with open(path, 'rb') as stream:
+        out = []
+        for index in make_reader(stream).get_summary().chunk_indexes:
+            stream.seek(index.chunk_start_offset + 9)
+            chunk = Chunk.read(ReadDataStream(stream))
+            out.append((index.chunk_start_offset, index.chunk_start_offset + index.chunk_length,
+                        [r.data for r in breakup_chunk(chunk, validate_crc=True) if isinstance(r, Message)]))
+    return out
