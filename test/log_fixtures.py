@@ -98,3 +98,20 @@ def chunks_of(path: Path) -> list[tuple[int, int, list[bytes]]]:
             out.append((index.chunk_start_offset, index.chunk_start_offset + index.chunk_length,
                         [r.data for r in breakup_chunk(chunk, validate_crc=True) if isinstance(r, Message)]))
     return out
+
+
+def rewrite_with_rosbags(source: Path, target: Path) -> None:
+    """The same messages (bytes, topics, types, definitions, offered QoS, receive times) written by
+    ``rosbags``' rosbag2 writer (MCAP storage): a log from another recorder, whose MCAP publish time is not
+    the header stamp."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    with AnyReader([source]) as reader, Writer(target, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        out = {}
+        for c in reader.connections:
+            out[c.id] = writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data,
+                                              rihs01=reader.typestore.hash_rihs01(c.msgtype),
+                                              offered_qos_profiles=c.ext.offered_qos_profiles)
+        for c, t, raw in reader.messages():
+            writer.write(out[c.id], t, raw)
