@@ -5,6 +5,11 @@ with trajectory and set-point commands (stamp 0, a future stamp, a refused one).
 from __future__ import annotations
 
 import json
+import os
+import signal
+import subprocess
+import sys
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -263,3 +268,33 @@ def test_a_log_rewritten_by_rosbags_gives_the_same_results(stepped_log: Path, tm
     report_a, report_b = resimulate(ours).as_dict(), resimulate(theirs).as_dict()
     report_a.pop('log'), report_b.pop('log')
     assert report_b == report_a and report_a['identical']
+
+
+def test_ctrl_c_stops_a_long_resim_within_a_second(tmp_path: Path) -> None:
+    """A 150 s log (150,000 poses): resim shows progress, and SIGINT ends it within 1 s, status 130, no
+    traceback."""
+    from log_fixtures import T0, pose
+    from rclpy.serialization import serialize_message
+
+    from micro_feeder.logs.writer import LogWriter
+    writer = LogWriter(tmp_path / 'long.mcap')
+    writer.add_topic('/particle/pose', 'geometry_msgs/msg/PoseStamped')
+    for i in range(150_000):
+        writer.write('/particle/pose', serialize_message(pose(i)), T0 + i * 1_000_000)
+    writer.close()
+    env = {**os.environ, 'PYTHONUNBUFFERED': '1'}
+    proc = subprocess.Popen([str(Path(sys.executable).parent / 'micro-feeder'), 'resim', str(tmp_path / 'long.mcap')],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        line = proc.stderr.readline()              # the first progress line (blocks until it comes)
+        assert line.startswith('resim: ') and 'stops' in line and 's left' in line, line
+        sent = time.monotonic()
+        proc.send_signal(signal.SIGINT)
+        proc.wait(timeout=30)
+        elapsed = time.monotonic() - sent
+    finally:
+        proc.kill()
+        proc.wait()
+    err = proc.stderr.read()
+    assert proc.returncode == 130 and 'interrupted' in err and 'Traceback' not in err, err
+    assert elapsed < 1.0, f'{elapsed:.2f} s to stop'
