@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ..logs.export import export_csv
+from ..progress import Progress
 from . import CommandError
 from ._logs import open_log, report_loss
 
@@ -22,10 +23,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     log = open_log(args.log)
+    progress = Progress('export', 0, 'messages')
     try:
-        paths = export_csv(log, args.csv, args.topics)
+        paths = export_csv(log, args.csv, args.topics, progress=progress)
     except OSError as err:
         raise CommandError(f'cannot write {args.csv}: {err}') from None
+    finally:
+        progress.close()
     for path in paths:
         print(path)
     report_loss(log)

@@ -5,11 +5,11 @@ from __future__ import annotations
 import argparse
 import json
 
+from ..progress import Progress
 from ..settings import parse_override
 from . import CommandError
 from ._common import add_model_options, settings_from_args
 from ._logs import open_log, report_loss
-from ._progress import Progress
 
 MAX_SIM_TIME = 6 * 3600.0  # s: a longer log is refused without --force (about 18 min of computing)
 
