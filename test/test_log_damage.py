@@ -102,3 +102,14 @@ def test_nothing_readable_is_refused_with_one_line(original, tmp_path):
         assert result.returncode == 2, result.stderr
         assert 'nothing readable' in result.stderr and 'Traceback' not in result.stderr
     assert not (tmp_path / 'out').exists()
+
+
+def test_replay_of_a_damaged_log_plays_what_is_readable(original, tmp_path):
+    chunks = chunks_of(original)
+    start, end, _ = chunks[2]
+    path = damaged_copy(original, tmp_path, (start + end) // 2, b'\x00\x11\x22\x33')
+    result = subprocess.run([str(BIN / 'micro-feeder'), 'replay', str(path), '--rate', '20'], capture_output=True,
+                            text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert f'at byte {start:,}' in result.stderr and 'Traceback' not in result.stderr
+    assert 'messages, timing error' in result.stdout
