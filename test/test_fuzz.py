@@ -3,8 +3,9 @@
 * Logs: a small complete log garbled, zeroed, 2-byte-flipped, truncated or spliced at seeded random
   offsets, through ``info``, ``export``, ``recover``, ``resim`` (and ``plot`` for some): exit status 0 or 2,
   nothing escapes ``main`` (an exception reaching the test is a traceback a user would see), bounded time
-  per call; after a same-length change ``recover`` keeps every message of every chunk the change did not
-  touch (chunks as the mcap library reads the original).
+  per call; ``info`` reports every change (a CRC or structure check catches it); after a same-length
+  change ``recover`` keeps every message of every chunk the change did not touch (chunks as the mcap
+  library reads the original).
 * CLI: seeded random command lines (absurd, non-finite, wrong-typed option values; unknown and
   out-of-range parameters; binary, missing and directory paths) for ``simulate``, ``contact``, ``resim``
   and the log commands: exit status 0 or 2, nothing escapes ``main``, bounded time.
@@ -86,6 +87,8 @@ def test_fuzzed_logs_through_every_log_command(base, tmp_path):
             status, err = run_cli(argv)
             assert status in (0, 2), f'{how}: {argv} -> {status}: {err}'
             outcomes[f'{argv[0]} exit {status}'] += 1
+            if argv[0] == 'info' and data != raw:   # no silent corruption: every change is reported
+                assert 'warning:' in err or status == 2, f'{how}: not reported'
             if status == 2:
                 assert 'error' in err.strip().splitlines()[-1], err
         if changed is not None and recovered.exists():

@@ -217,12 +217,7 @@ class McapFile:
         if end < len(MAGIC) or self._map[end] != Opcode.DATA_END:
             return True
         (expected,) = struct.unpack_from('<I', self._map, end + HEAD)
-        if not expected:
-            return True
-        crc = 0
-        for lo in range(0, end, 1 << 24):
-            crc = zlib.crc32(self._map[lo:min(end, lo + (1 << 24))], crc)
-        return crc == expected
+        return not expected or self._crc(end) == expected
 
     def _verify_chunks(self) -> None:
         """After a data-section CRC mismatch: find the damaged chunks, recount what is readable."""
@@ -253,6 +248,7 @@ class McapFile:
             end = pos + HEAD + length
             if op in (Opcode.DATA_END, Opcode.FOOTER) and end <= self.size:
                 self.readable_bytes = end
+                self._scanned_to_end(pos, op)
                 return
             if op not in KNOWN_OPCODES or end > self.size:
                 following = self._resync(pos + 1)
@@ -269,6 +265,26 @@ class McapFile:
             pos = end
             self.readable_bytes = pos
         self.truncated = True   # no DataEnd: the writer did not finish
+
+    def _scanned_to_end(self, pos: int, op: int) -> None:
+        """A scanned file whose data section is whole: its summary or footer is damaged or cut (a writer
+        always writes them); the data-section CRC, when stored, says whether anything else changed."""
+        before = len(self.damage)
+        if op == Opcode.DATA_END:
+            (expected,) = struct.unpack_from('<I', self._map, pos + HEAD)
+            if expected and self._crc(pos) != expected and len(self.damage) == before:
+                self.report(None, 'data-section CRC mismatch outside the messages (a chunk header or index '
+                                  'changed): every chunk passed its own CRC and was read', 0)
+        if not any('summary' in d.what for d in self.damage):
+            self.report(pos + HEAD + 4, 'summary or footer damaged or cut off: messages found by scanning the '
+                                        'file instead', 0)
+
+    def _crc(self, end: int) -> int:
+        """CRC-32 of the file's first ``end`` bytes, in 16 MiB slices."""
+        crc = 0
+        for lo in range(0, end, 1 << 24):
+            crc = zlib.crc32(self._map[lo:min(end, lo + (1 << 24))], crc)
+        return crc
 
     def _scan_record(self, pos: int, op: int, length: int) -> None:
         body = self._map[pos + HEAD:pos + HEAD + length]
