@@ -11,13 +11,19 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any
 
 from . import CommandError
 
-STEPS_PER_WALL_SECOND = 2e5   # offline kernel, measured: 2e4 steps of 1e-4 s (2000 strokes) in 0.1 s, load 4.7
+# simulate: one CSV row per integration step. Measured (load 3, 2 cores): 300 s of sim time at dt 1e-4 s,
+# 3.16e6 rows, in 66 s (5 s integrating, 58 s writing the CSV): ~5e4 steps per wall second.
+STEPS_PER_WALL_SECOND = 5e4
+BYTES_PER_STEP = 15 * 8       # the time series in memory: 15 columns of float64 per row
 MAX_OFFLINE_WALL_S = 600.0    # simulate: refuse an estimate beyond 10 minutes (--force)
+MAX_OFFLINE_BYTES = 2e9       # ... or beyond 2 GB of time series (--force)
 MAX_NODE_WALL_S = 24 * 3600.0  # run/hil: refuse beyond a day of wall time (--force)
 KNOTS_PER_STROKE = 40         # the actuator's default knots_per_stroke
 MAX_KNOTS = 2_000_000         # knots x actuators in one trajectory message (~48 MB per actuator at the limit)
@@ -63,6 +69,8 @@ def check_cost(args: argparse.Namespace, flat: Mapping[str, Any]) -> None:
     """Refuse a command whose estimated cost is absurd (see the module docstring). Raises CommandError."""
     command = getattr(args, 'command', None)
     force = getattr(args, 'force', False)
+    if getattr(args, 'record', None):
+        check_new_log_path(args.record)
     duration = getattr(args, 'duration', None)
     _check_duration('--duration', duration)
     _check_duration('--timeout', getattr(args, 'timeout', None))
@@ -78,6 +86,20 @@ def check_cost(args: argparse.Namespace, flat: Mapping[str, Any]) -> None:
                                '--real-time-factor (or add --force if you mean it)')
     elif command == 'simulate':
         _check_offline(flat, duration, force)
+
+
+def check_new_log_path(path: str) -> None:
+    """Refuse, before any node starts, a ``--record`` path a new log cannot be written to."""
+    target = Path(path)
+    if target.exists() and (target.suffix == '.mcap' or not target.is_dir()):
+        raise CommandError(f'--record {path}: {path} exists; give a new name (a log is never overwritten)')
+    if target.is_dir() and any(target.iterdir()):
+        raise CommandError(f'--record {path}: the directory exists and is not empty; give a new name')
+    parent = target.parent
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
+        raise CommandError(f'--record {path}: cannot create it: {parent} is not a writable directory')
 
 
 def _check_knots(flat: Mapping[str, Any], force: bool) -> None:
@@ -109,9 +131,9 @@ def _check_offline(flat: Mapping[str, Any], duration: float | None, force: bool)
         raise CommandError(f'the run would last {sim} s of sim time: lower stroke.count, stroke.pause or '
                            'stroke.delay, or give --duration')
     steps = sim / min(dt, check)
-    wall = steps / STEPS_PER_WALL_SECOND
-    if wall > MAX_OFFLINE_WALL_S and not force:
+    wall, size = steps / STEPS_PER_WALL_SECOND, steps * BYTES_PER_STEP
+    if (wall > MAX_OFFLINE_WALL_S or size > MAX_OFFLINE_BYTES) and not force:
         which = '--duration' if duration is not None else 'stroke.count / stroke.pause / stroke.delay (or --duration)'
-        raise CommandError(f'{sim:.3g} s of sim time at a step of {min(dt, check):g} s is about {steps:.3g} steps, '
-                           f'~{_human(wall)} of computing: lower {which} or raise integration.dt / '
-                           'integration.check_step (or add --force if you mean it)')
+        raise CommandError(f'{sim:.3g} s of sim time at a step of {min(dt, check):g} s is about {steps:.3g} steps '
+                           f'(time series of ~{size / 1e9:.3g} GB, ~{_human(wall)} of computing and writing): lower '
+                           f'{which} or raise integration.dt / integration.check_step (or add --force if you mean it)')
