@@ -80,6 +80,9 @@ def read_parameters_file(path: Path | str) -> dict[str, Any]:
         tree = _load_yaml(path.read_text())
     except OSError as err:
         raise SettingsError(f'cannot read parameters file {path}: {err.strerror}') from err
+    except UnicodeDecodeError:
+        raise SettingsError(f'parameters file {path} is not text (binary data): give a YAML parameters file '
+                            'such as config/feeder.yaml') from None
     except yaml.YAMLError as err:
         raise SettingsError(f'parameters file {path} is not valid YAML: {err}') from err
     if tree is None:

@@ -6,6 +6,10 @@ from pathlib import Path
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
+from mcap.data_stream import ReadDataStream
+from mcap.reader import make_reader
+from mcap.records import Chunk, Message
+from mcap.stream_reader import breakup_chunk
 from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from std_msgs.msg import Float64MultiArray, String
@@ -81,3 +85,33 @@ def write_motion_log(path: Path, n: int = 300, period_ns: int = 1_000_000, **wri
             writer.write('/particle/contact_state', serialize_message(String(data=MODES[i // 100 % 3])), t + 3)
     writer.close()
     return poses
+
+
+def chunks_of(path: Path) -> list[tuple[int, int, list[bytes]]]:
+    """(start offset, end offset, message bytes) of every chunk of a complete file, as the mcap library
+    (not our reader) reads them."""
+    with open(path, 'rb') as stream:
+        out = []
+        for index in make_reader(stream).get_summary().chunk_indexes:
+            stream.seek(index.chunk_start_offset + 9)
+            chunk = Chunk.read(ReadDataStream(stream))
+            out.append((index.chunk_start_offset, index.chunk_start_offset + index.chunk_length,
+                        [r.data for r in breakup_chunk(chunk, validate_crc=True) if isinstance(r, Message)]))
+    return out
+
+
+def rewrite_with_rosbags(source: Path, target: Path) -> None:
+    """The same messages (bytes, topics, types, definitions, offered QoS, receive times) written by
+    ``rosbags``' rosbag2 writer (MCAP storage): a log from another recorder, whose MCAP publish time is not
+    the header stamp."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag2 import StoragePlugin, Writer
+
+    with AnyReader([source]) as reader, Writer(target, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        out = {}
+        for c in reader.connections:
+            out[c.id] = writer.add_connection(c.topic, c.msgtype, msgdef=c.msgdef.data,
+                                              rihs01=reader.typestore.hash_rihs01(c.msgtype),
+                                              offered_qos_profiles=c.ext.offered_qos_profiles)
+        for c, t, raw in reader.messages():
+            writer.write(out[c.id], t, raw)

@@ -171,3 +171,94 @@ def test_cli_keeps_traffic_on_the_host_unless_the_user_says_otherwise(monkeypatc
     monkeypatch.setattr(replay_module, 'main', fake_main)
     assert cli_main(['replay', str(tmp_path / 'log')]) == 0
     assert seen['range'] == expected
+
+
+def test_replay_delivers_the_first_message_to_a_subscriber_in_another_process(ros_context, tmp_path):
+    """``micro-feeder replay --wait-for-subscribers`` (its own process) waits for this subscriber before the
+    first message: every message arrives, the first one included, in order."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    poses = write_motion_log(tmp_path / 'log', n=N)
+    listener = rclpy.create_node('listener', context=ros_context)
+    got: list[bytes] = []
+    listener.create_subscription(PoseStamped, '/particle/pose', got.append, 1000, raw=True)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(listener)
+    proc = subprocess.Popen([str(Path(sys.executable).parent / 'micro-feeder'), 'replay', str(tmp_path / 'log'),
+                             '--topic', 'particle/pose', '--wait-for-subscribers'],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        wait_until(lambda: proc.poll() is not None and len(got) >= N, 60, executor=executor,
+                   what='replay done and every pose delivered')
+    finally:
+        proc.kill()
+        _, err = proc.communicate()
+        executor.shutdown()
+        listener.destroy_node()
+    assert proc.returncode == 0, err
+    assert got == poses
+
+
+def test_clock_is_sim_time_best_effort_and_playback_options(ros_context, tmp_path):
+    """--clock publishes the header stamps (sim time, 0-0.3 s here), not the receive time (1.7e9 s), with
+    rosbag2's best-effort clock QoS; start_paused holds the first message; playback_duration ends early;
+    a QoS override and a namespace change the publishers."""
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
+    from rosgraph_msgs.msg import Clock
+
+    write_motion_log(tmp_path / 'log', n=N)
+    (tmp_path / 'qos.yaml').write_text('/particle/twist: {reliability: best_effort, depth: 7}\n')
+    listener = rclpy.create_node('listener', context=ros_context)
+    clocks: list[int] = []
+    listener.create_subscription(Clock, '/clock', lambda m: clocks.append(m.clock.sec * 10**9 + m.clock.nanosec),
+                                 QoSProfile(depth=10, reliability=ReliabilityPolicy.BEST_EFFORT))
+    replay = Replay(context=ros_context, cli_args=['--ros-args', '-r', '__ns:=/feeder_a'], parameter_overrides=[
+        Parameter('log', value=str(tmp_path / 'log')), Parameter('publish_clock', value=True),
+        Parameter('start_paused', value=True), Parameter('playback_duration', value=0.1),
+        Parameter('qos_profile_overrides_path', value=str(tmp_path / 'qos.yaml'))])
+    pause = listener.create_client(SetBool, '/feeder_a/replay/pause')
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(replay)
+    executor.add_node(listener)
+    try:
+        assert replay._outputs['/particle/pose'].topic_name == '/feeder_a/particle/pose'
+        twist = replay._outputs['/particle/twist'].qos_profile
+        assert twist.reliability == ReliabilityPolicy.BEST_EFFORT and twist.depth == 7
+        wait_until(lambda: listener.count_publishers('/clock') == 1 and pause.service_is_ready(), 10,
+                   executor=executor, what='clock and pause service matched')
+        replay.start()
+        deadline = time.monotonic() + 0.3
+        wait_until(lambda: time.monotonic() > deadline, 1, executor=executor)
+        assert replay.published == 0                          # started paused
+        f = pause.call_async(SetBool.Request(data=False))
+        wait_until(f.done, 5, executor=executor, what='resumed')
+        wait_until(replay.finished.done, 10, executor=executor, what='replay finished')
+        wait_until(lambda: clocks and clocks[-1] == 99_000_000, 5, executor=executor, what='the last stamp on /clock')
+    finally:
+        replay.close()
+        executor.shutdown()
+        replay.destroy_node()
+        listener.destroy_node()
+    assert replay.published == 3 * 100 + 1                  # 0.1 s of the log: 100 poses, twists, wrenches, 1 mode
+    assert set(clocks) <= {i * 1_000_000 for i in range(100)}  # only the stamps (sim time), 0-0.099 s
+
+
+def test_a_dead_player_ends_the_replay_with_the_reason(ros_context, tmp_path, monkeypatch):
+    """Whatever kills the player thread ends the replay (finished, ``failure`` says why) instead of leaving
+    the process idling; ``main`` then exits with status 1."""
+    write_motion_log(tmp_path / 'log', n=10)
+    replay = Replay(context=ros_context, parameter_overrides=[Parameter('log', value=str(tmp_path / 'log'))])
+
+    def broken(*_args, **_kwargs):
+        raise RuntimeError('disk gone')
+
+    monkeypatch.setattr(replay.log, 'messages', broken)
+    try:
+        replay.start()
+        wait_until(replay.finished.done, 5, what='player ended')
+        assert replay.finished.result() is False and 'RuntimeError: disk gone' in replay.failure
+    finally:
+        replay.close()
+        replay.destroy_node()

@@ -11,6 +11,8 @@ import argparse
 import importlib
 import pkgutil
 import sys
+import warnings
+from typing import TextIO
 
 from ..physics.parameters import ParameterError
 from ..settings import SettingsError
@@ -38,17 +40,58 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _show_warning(message: Warning | str, category: type[Warning], filename: str, lineno: int,
+                  file: TextIO | None = None, line: str | None = None) -> None:
+    """Our own warnings (a damaged or truncated log ...) as one ``warning: ...`` line; others as Python shows them."""
+    if category.__module__.startswith('micro_feeder'):
+        print(f'warning: {message}', file=sys.stderr)
+    else:
+        _default_show_warning(message, category, filename, lineno, file, line)
+
+
+_default_show_warning = warnings.showwarning
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    """Run one command. A user mistake (bad option, parameter, path or file) is one line on stderr and exit
+    status 2; Ctrl-C is ``interrupted`` and status 130, never a traceback."""
+    command = 'micro-feeder'
     try:
+        warnings.showwarning = _show_warning
+        parser = build_parser()
+        args = parser.parse_args(argv)
+        command = f'micro-feeder {args.command}'
         return int(args.func(args) or 0)
-    except (CommandError, SettingsError, ParameterError) as err:
-        print(f'micro-feeder {args.command}: error: {err}', file=sys.stderr)
-        return 2
     except KeyboardInterrupt:
-        print('interrupted', file=sys.stderr)
+        print(f'{command}: interrupted', file=sys.stderr)
         return 130
+    except Exception as err:  # user mistakes are classified here, once, for every command
+        reason = user_error(err)
+        if reason is None:
+            raise
+        print(f'{command}: error: {reason}', file=sys.stderr)
+        return 2
+
+
+def user_error(err: Exception) -> str | None:
+    """The one-line reason when ``err`` is a user's mistake (refused value, path, file, parameters that
+    make the simulation fail), else None (a bug: the traceback is shown)."""
+    if isinstance(err, (CommandError, SettingsError, ParameterError)):
+        return str(err)
+    if isinstance(err, OSError):
+        where = f' {err.filename}' if err.filename else ''
+        return f'cannot use{where}: {err.strerror or err}'
+    if isinstance(err, MemoryError) or 'Maximum allowed size exceeded' in str(err):
+        return ('the request needs more memory than this machine has: lower the size that drives it '
+                '(stroke.count, --duration, the sweep size); see "micro-feeder COMMAND --help"')
+    dynamics = sys.modules.get('micro_feeder.physics.dynamics.model')
+    if dynamics is not None and isinstance(err, dynamics.SimulationError):
+        from ._common import changed_parameters
+        changed = changed_parameters()
+        hint = (f'parameters you set: {", ".join(changed)}; check them against docs/parameters.md'
+                if changed else 'with the default parameters')
+        return f'the simulation failed: {err} ({hint})'
+    return None
 
 
 if __name__ == '__main__':

@@ -1,24 +1,30 @@
-"""Opening a log for the log commands: a missing or unreadable log is a user-facing error, and a
-truncated one is reported on stderr (once) instead of as a Python warning."""
+"""Opening a log for the log commands: a missing or unreadable log is a user-facing error; a truncated or
+damaged one is read as far as it is readable (the reader's warnings go to stderr as ``warning: ...``
+lines, see ``cli.main``), and :func:`report_loss` ends the command with what was lost."""
 
 from __future__ import annotations
 
 import sys
-import warnings
 from pathlib import Path
 
-from ..logs.reader import LogFormatError, LogReader, TruncatedLogWarning
+from ..logs.reader import LogFormatError, LogReader
 from . import CommandError
 
 
 def open_log(path: str) -> LogReader:
-    """The log at ``path`` (directory or ``.mcap``); truncation warnings go to stderr."""
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter('always', TruncatedLogWarning)
-        try:
-            log = LogReader(Path(path))
-        except (OSError, LogFormatError) as err:
-            raise CommandError(str(err)) from None
-    for w in caught:
-        print(f'warning: {w.message}', file=sys.stderr)
+    """The log at ``path`` (directory or ``.mcap``); CommandError when it is not a log or nothing in it is
+    readable."""
+    try:
+        log = LogReader(Path(path))
+    except (OSError, LogFormatError) as err:
+        raise CommandError(str(err)) from None
+    if not log.message_count and log.damage:
+        raise CommandError(f'nothing readable in {path}: {log.damage_report()}')
     return log
+
+
+def report_loss(log: LogReader) -> None:
+    """One stderr line saying what the damage found in ``log`` cost (nothing when it has none)."""
+    report = log.damage_report()
+    if report:
+        print(f'warning: {log.path}: {report} (the rest was read)', file=sys.stderr)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ..logs.summary import format_summary, summarize
-from ._logs import open_log
+from ._logs import open_log, report_loss
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -17,5 +17,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    print(format_summary(summarize(open_log(args.log))))
+    log = open_log(args.log)
+    print(format_summary(summarize(log)))
+    report_loss(log)
     return 0

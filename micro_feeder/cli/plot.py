@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 
 from . import CommandError
-from ._logs import open_log
+from ._logs import open_log, report_loss
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -33,4 +33,5 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as err:
         raise CommandError(str(err)) from None
     print(f'wrote {path}')
+    report_loss(log)
     return 0

@@ -5,9 +5,12 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 
 from . import CommandError
 from ._foxglove import add_foxglove_option, live_view
+
+_NAME = re.compile(r'[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*')
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -21,7 +24,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument('--topic', action='append', dest='topics', default=[], metavar='TOPIC',
                         help='replay only this topic (repeatable)')
     parser.add_argument('--remap', action='append', default=[], metavar='FROM:=TO', help='rename a topic')
-    parser.add_argument('--clock', action='store_true', help='publish the playback time on /clock')
+    parser.add_argument('--clock', action='store_true',
+                        help='publish the log\'s sim time (its header stamps, or its recorded /clock) on /clock, '
+                             'best effort, as rosbag2 does; the recorded /clock is then not replayed')
+    parser.add_argument('--delay', type=float, default=0.0, metavar='S', help='wait S seconds before the first message')
+    parser.add_argument('--wait-for-subscribers', action='store_true',
+                        help='before the first message, wait until every replayed topic has a subscriber '
+                             '(so a subscriber in another process misses nothing)')
+    parser.add_argument('--start-paused', action='store_true',
+                        help='start paused; the replay/pause service (std_srvs/SetBool, false) resumes')
+    parser.add_argument('--playback-duration', type=float, default=0.0, metavar='S',
+                        help='replay only S seconds of the log (from --start-offset); 0 = to the end')
+    parser.add_argument('--qos-profile-overrides-path', metavar='FILE.yaml',
+                        help='rosbag2 QoS overrides: a YAML map of topic -> policies (reliability, durability, '
+                             'history, depth) replacing the recorded ones')
+    parser.add_argument('--namespace', metavar='NS',
+                        help='publish under this namespace (/NS/particle/pose ...; /clock and /diagnostics stay '
+                             'global)')
     add_foxglove_option(parser)
     parser.set_defaults(func=run)
 
@@ -30,8 +49,12 @@ def _check(args: argparse.Namespace) -> None:
     """Refuse what the replay node would refuse, with the option's name."""
     if not 0.01 <= args.rate <= 100.0:
         raise CommandError(f'--rate {args.rate}: must be within [0.01, 100]')
-    if not (math.isfinite(args.start_offset) and 0.0 <= args.start_offset <= 1e9):
-        raise CommandError(f'--start-offset {args.start_offset}: must be within [0, 1e9] s')
+    for option, value, high in (('--start-offset', args.start_offset, 1e9), ('--delay', args.delay, 3600.0),
+                                ('--playback-duration', args.playback_duration, 1e9)):
+        if not (math.isfinite(value) and 0.0 <= value <= high):
+            raise CommandError(f'{option} {value}: must be within [0, {high:g}] s')
+    if args.namespace is not None and not _NAME.fullmatch(args.namespace.strip('/')):
+        raise CommandError(f'--namespace {args.namespace!r}: not a ROS namespace (letters, digits, _ and /)')
     for rule in args.remap:
         source, sep, target = rule.partition(':=')
         if not (sep and source and target):
@@ -47,9 +70,18 @@ def run(args: argparse.Namespace) -> int:
     def strings(values: list[str]) -> str:
         return '[' + ','.join(f'"{v}"' for v in values) + ']' if values else '[""]'
 
-    argv = ['replay', '--ros-args', '-p', f'log:={args.log}', '-p', f'rate:={args.rate}',
-            '-p', f'loop:={str(args.loop).lower()}', '-p', f'start_offset:={args.start_offset}',
-            '-p', f'topics:={strings(args.topics)}', '-p', f'remap:={strings(args.remap)}',
-            '-p', f'publish_clock:={str(args.clock).lower()}']
+    def flag(value: bool) -> str:
+        return str(value).lower()
+
+    ros_args = ['-p', f'log:={args.log}', '-p', f'rate:={args.rate}', '-p', f'loop:={flag(args.loop)}',
+                '-p', f'start_offset:={args.start_offset}', '-p', f'topics:={strings(args.topics)}',
+                '-p', f'remap:={strings(args.remap)}', '-p', f'publish_clock:={flag(args.clock)}',
+                '-p', f'delay:={args.delay}', '-p', f'wait_for_subscribers:={flag(args.wait_for_subscribers)}',
+                '-p', f'start_paused:={flag(args.start_paused)}', '-p', f'playback_duration:={args.playback_duration}']
+    if args.qos_profile_overrides_path:
+        ros_args += ['-p', f'qos_profile_overrides_path:={args.qos_profile_overrides_path}']
+    if args.namespace:
+        ros_args += ['-r', f'__ns:=/{args.namespace.strip("/")}']
+    argv = ['replay', '--ros-args', *ros_args]
     with live_view(args.foxglove) as viewer:
         return replay_main(argv) if viewer is None else replay_main(argv, tap=viewer.tap)

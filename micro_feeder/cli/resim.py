@@ -6,10 +6,13 @@ import argparse
 import json
 from typing import Any
 
+from ..progress import Progress
 from ..settings import parse_override
 from . import CommandError
 from ._common import add_model_options, settings_from_args
-from ._logs import open_log
+from ._logs import open_log, report_loss
+
+MAX_SIM_TIME = 6 * 3600.0  # s: a longer log is refused without --force (about 18 min of computing)
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -72,10 +75,13 @@ def run(args: argparse.Namespace) -> int:
     # A parameters file may also hold other nodes' settings (config/feeder.yaml: feed.*): only the model's apply.
     overrides = {name: value for name, value in overrides.items() if name in model}
     log = open_log(args.log)
+    progress = Progress('resim', 0, 'stops')
     try:
-        report = resimulate(log, overrides)
+        report = resimulate(log, overrides, progress=progress, max_sim_time=None if args.force else MAX_SIM_TIME)
     except ResimError as err:
         raise CommandError(str(err)) from err
+    finally:
+        progress.close()
     tolerance, source = _tolerance(args.tolerance, log, overrides)
     if args.json:
         print(json.dumps({**report.as_dict(), 'tolerance': tolerance, 'tolerance_source': source,
@@ -84,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
         print(verdict(report, tolerance, source))
         for note in report.notes:
             print(f'  note: {note}')
+    report_loss(log)
     if args.tolerance is not None and not report.max_error <= args.tolerance:
         return 1
     return 0

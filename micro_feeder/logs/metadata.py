@@ -45,11 +45,39 @@ def parse_qos(text: str) -> list[dict[str, Any]]:
     profiles = yaml.safe_load(text) if text else None
     if not isinstance(profiles, list):
         return []
-    for profile in profiles:
-        for key, names in (('history', _HISTORY), ('reliability', _RELIABILITY), ('durability', _DURABILITY)):
-            value = profile.get(key)
+    return [_normalise(profile) for profile in profiles if isinstance(profile, dict)]
+
+
+def _normalise(profile: dict[str, Any]) -> dict[str, Any]:
+    """Policies given as rmw enum integers or in any case -> lower-case names (absent ones stay absent)."""
+    for key, names in (('history', _HISTORY), ('reliability', _RELIABILITY), ('durability', _DURABILITY)):
+        value = profile.get(key)
+        if value is not None:
             profile[key] = names.get(value, 'system_default') if isinstance(value, int) else str(value).lower()
-    return profiles
+    return profile
+
+
+_QOS_KEYS = {'history', 'depth', 'reliability', 'durability', 'deadline', 'lifespan', 'liveliness',
+             'liveliness_lease_duration', 'avoid_ros_namespace_conventions'}
+
+
+def read_qos_overrides(path: Path | str) -> dict[str, dict[str, Any]]:
+    """``{topic: profile}`` from a rosbag2 QoS overrides file (``ros2 bag play --qos-profile-overrides-path``):
+    a YAML mapping of topic names to partial profiles (``reliability: best_effort``, ``durability``,
+    ``history``, ``depth`` ...), normalised like :func:`parse_qos`. ValueError says what is wrong."""
+    try:
+        document = yaml.safe_load(Path(path).read_text())
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as err:
+        raise ValueError(f'QoS overrides file {path}: cannot read it as YAML ({err})') from None
+    if not isinstance(document, dict) or not all(isinstance(v, dict) for v in document.values()):
+        raise ValueError(f'QoS overrides file {path}: must map topic names to QoS profiles '
+                         '(e.g. "/particle/pose: {reliability: best_effort}")')
+    for topic, profile in document.items():
+        unknown = set(profile) - _QOS_KEYS
+        if unknown:
+            raise ValueError(f'QoS overrides file {path}: {topic}: unknown polic{"ies" if len(unknown) > 1 else "y"} '
+                             f'{", ".join(sorted(unknown))} (known: {", ".join(sorted(_QOS_KEYS))})')
+    return {str(topic): _normalise(dict(profile)) for topic, profile in document.items()}
 
 
 @dataclass

@@ -1,51 +1,67 @@
-"""Reading logs: a rosbag2 directory, a bare ``.mcap``, or a truncated file left by a crash.
+"""Reading logs: a rosbag2 directory, a bare ``.mcap``, a truncated file left by a crash, or a damaged one.
 
-A complete file is read through its summary and indexes (messages in log-time order). A file without a
-summary (the recorder was killed) is read front to back up to its last whole chunk, with a
-:class:`TruncatedLogWarning` saying so. Messages come as :class:`LogMessage`: the CDR bytes plus a
-lazily decoded ``message`` (mcap-ros2-support's decoder: attribute access like the ROS message).
+Files are read through :class:`~.mcap_file.McapFile`, which verifies every CRC the file has and skips
+what is damaged: a truncated file (no summary) is read up to its last whole chunk with a
+:class:`TruncatedLogWarning`; a damaged chunk or record is skipped with one :class:`DamagedLogWarning`
+naming it, and ``damage`` / ``lost`` say what and how much. A damaged ``metadata.yaml`` falls back to the
+directory's ``.mcap`` files. Messages come as :class:`LogMessage`: the CDR bytes plus a lazily decoded
+``message`` (mcap-ros2-support's decoder: attribute access like the ROS message); ``messages(...,
+decoded=True)`` skips (and reports) messages that do not decode.
+
+Sim time is the messages' ``header.stamp`` (:attr:`LogMessage.stamp_ns`, read from the CDR bytes for
+types whose first field is a ``std_msgs/Header``), never the MCAP publish time, which recorders fill in
+differently (ours with the stamp, ``rosbags`` and others with the receive time).
 
 Example, what ``resim`` needs::
 
     log = LogReader('out/run1')
-    for m in log.messages(['actuator/trajectory', 'actuator/command']):
+    for m in log.messages(['actuator/trajectory', 'actuator/command'], decoded=True):
         print(m.topic, m.log_time, m.message)
 """
 
 from __future__ import annotations
 
-import struct
 import warnings
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from mcap.exceptions import McapError
-from mcap.reader import NonSeekingReader, make_reader
 from mcap.records import Channel, Message, Schema
 from mcap_ros2.decoder import DecoderFactory
 
+from .mcap_file import Damage, McapFile, NotMcapError
 from .metadata import LogFormatError, read_file_list
-from .writer import RECORDER_METADATA
+from .writer import RECORDER_METADATA, header_stamp_ns
 
-READ_ERRORS = (McapError, EOFError, ValueError, OSError, struct.error)
-MAGIC = b'\x89MCAP0\r\n'  # the first 8 bytes of every MCAP file
-
-__all__ = ['READ_ERRORS', 'LogFormatError', 'LogMessage', 'LogReader', 'LogTopic', 'TruncatedLogWarning']
+__all__ = ['DamagedLogWarning', 'LogFormatError', 'LogMessage', 'LogReader', 'LogTopic', 'LogWarning',
+           'TruncatedLogWarning']
 
 
+HEADER_TYPES = ('std_msgs/msg/Header', 'std_msgs/Header')  # a Header message is its own stamp
 _UNDECODED = object()  # LogMessage.message not decoded yet
 
 
-class TruncatedLogWarning(UserWarning):
+class LogWarning(UserWarning):
+    """Something about a log the reader worked around (the log commands print these on stderr)."""
+
+
+class TruncatedLogWarning(LogWarning):
     """A log file has no summary (its writer was killed): read up to its last whole chunk."""
+
+
+class DamagedLogWarning(LogWarning):
+    """Part of a log is damaged (CRC mismatch, unreadable chunk or record, bad metadata.yaml): skipped."""
+
+
+class UndecodableMessage(ValueError):
+    """A message whose bytes do not decode with its schema."""
 
 
 @dataclass(slots=True)
 class LogMessage:
     """One recorded message: topic, ``pkg/msg/Type``, times [ns], CDR bytes, and ``message`` decoded on
-    first access."""
+    first access (:class:`UndecodableMessage` when the bytes do not decode)."""
 
     topic: str
     type: str
@@ -53,13 +69,18 @@ class LogMessage:
     publish_time_ns: int
     data: bytes
     decode: Callable[[bytes], Any] = field(repr=False)
+    stamped: bool = False
     _decoded: Any = field(default=_UNDECODED, init=False, repr=False, compare=False)
 
     @property
     def message(self) -> Any:
         """The decoded message (attributes named as the ROS message's fields), decoded once."""
         if self._decoded is _UNDECODED:
-            self._decoded = self.decode(self.data)
+            try:
+                self._decoded = self.decode(self.data)
+            except Exception as err:  # damaged bytes make the decoder raise anything
+                raise UndecodableMessage(f'{self.topic} message at log time {self.log_time_ns} does not decode as '
+                                         f'{self.type}: {err}') from None
         return self._decoded
 
     @property
@@ -68,14 +89,19 @@ class LogMessage:
         return self.log_time_ns * 1e-9
 
     @property
+    def stamp_ns(self) -> int | None:
+        """``header.stamp`` [ns] for types that start with a ``std_msgs/Header``, else None."""
+        return header_stamp_ns(self.data) if self.stamped and len(self.data) >= 12 else None
+
+    @property
     def publish_time(self) -> float:
-        """Header stamp [s] for stamped types, else the receive time."""
+        """MCAP publish time [s] (recorder-dependent: use :attr:`stamp_ns` for sim time)."""
         return self.publish_time_ns * 1e-9
 
 
 @dataclass
 class LogTopic:
-    """A topic in a log: name, type, message count, channel metadata (``offered_qos_profiles`` ...)."""
+    """A topic in a log: name, type, readable message count, channel metadata (``offered_qos_profiles`` ...)."""
 
     name: str
     type: str
@@ -83,57 +109,53 @@ class LogTopic:
     metadata: dict[str, str] = field(default_factory=dict)
 
 
-@dataclass
-class _FileIndex:
-    """What a first look at one MCAP file found."""
-
-    path: Path
-    complete: bool
-    start_ns: int | None = None
-    end_ns: int | None = None
-    counts: dict[str, int] = field(default_factory=dict)
-    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
-    readable_bytes: int = 0
-
-
-def _iter_stream(path: Path, topics: Iterable[str] | None = None) -> Iterator[tuple[Schema, Channel, Message]]:
-    """Messages of a file in file order, stopping quietly at the first incomplete or damaged record."""
-    with open(path, 'rb') as stream:
-        reader = NonSeekingReader(stream, validate_crcs=True)
-        try:
-            yield from reader.iter_messages(topics=topics, log_time_order=False)
-        except READ_ERRORS:
-            return
+def _is_stamped(schema: Schema) -> bool:
+    """True when the schema's first field is a ``std_msgs/Header`` (read from the log's own schema text)."""
+    for line in schema.data.decode(errors='replace').splitlines():
+        line = line.split('#', 1)[0].strip()
+        if line and '=' not in line.split()[0]:
+            return line.split()[0] in (*HEADER_TYPES, 'Header')
+    return False
 
 
 class LogReader:
     """A log opened for reading: ``files``, ``topics``, ``start_ns``/``end_ns``, ``truncated`` files,
-    the recorder's ``recorder_info`` (loss counters ...), and :meth:`messages`."""
+    ``damage`` found so far and ``lost`` messages, the recorder's ``recorder_info`` (loss counters ...),
+    and :meth:`messages`."""
 
     def __init__(self, path: Path | str) -> None:
         self.path = Path(path)
+        self.damage: list[Damage] = []
+        self.undecodable: dict[str, int] = {}
         self.files = self._find_files()
-        self._channels: dict[str, tuple[Schema, Channel]] = {}
-        self._decoders: dict[str, Callable[[bytes], Any]] = {}
-        self._index = [self._index_file(p) for p in self.files]
-        self.truncated = [i.path for i in self._index if not i.complete]
-        for info in self._index:
-            if not info.complete:
+        self._decoders: dict[int, Callable[[bytes], Any]] = {}
+        self._stamped: dict[int, bool] = {}
+        try:
+            self._mcaps = [McapFile(p, self._on_damage) for p in self.files]
+        except NotMcapError as err:
+            raise LogFormatError(str(err)) from None
+        self.truncated = [f.path for f in self._mcaps if f.truncated]
+        for f in self._mcaps:
+            if f.truncated:
                 warnings.warn(
-                    f'{info.path} is truncated (no summary; its writer did not finish): read up to its last '
-                    f'whole chunk, {info.readable_bytes} of {info.path.stat().st_size} bytes',
-                    TruncatedLogWarning, stacklevel=2)
+                    f'{f.path} is truncated (no summary; its writer did not finish): read up to its last '
+                    f'whole chunk, {f.readable_bytes} of {f.size} bytes', TruncatedLogWarning, stacklevel=2)
         self.topics: dict[str, LogTopic] = {}
-        for topic, (schema, channel) in self._channels.items():
-            count = sum(i.counts.get(topic, 0) for i in self._index)
-            self.topics[topic] = LogTopic(topic, schema.name, count, dict(channel.metadata))
-        starts = [i.start_ns for i in self._index if i.start_ns is not None]
-        ends = [i.end_ns for i in self._index if i.end_ns is not None]
+        for f in self._mcaps:
+            for cid, channel in f.channels.items():
+                schema = f.schemas.get(channel.schema_id)
+                if schema is None:
+                    continue
+                topic = self.topics.setdefault(channel.topic, LogTopic(channel.topic, schema.name, 0,
+                                                                       dict(channel.metadata)))
+                topic.count += f.counts.get(cid, 0)
+        starts = [f.start_ns for f in self._mcaps if f.start_ns is not None]
+        ends = [f.end_ns for f in self._mcaps if f.end_ns is not None]
         self.start_ns = min(starts, default=0)
         self.end_ns = max(ends, default=0)
         self.recorder_info: dict[str, str] = {}
-        for info in self._index:
-            self.recorder_info.update(info.metadata.get(RECORDER_METADATA, {}))
+        for f in self._mcaps:
+            self.recorder_info.update(f.metadata.get(RECORDER_METADATA, {}))
 
     # -- queries ------------------------------------------------------------------------------------
     @property
@@ -144,6 +166,21 @@ class LogReader:
     @property
     def message_count(self) -> int:
         return sum(t.count for t in self.topics.values())
+
+    @property
+    def lost(self) -> int | None:
+        """Messages lost to damage found so far (None when some damage has an unknown count)."""
+        counts = [d.lost for d in self.damage]
+        return None if None in counts else sum(counts) + sum(self.undecodable.values())
+
+    def damage_report(self) -> str:
+        """One line on the damage found so far ('' when none)."""
+        if not self.damage and not self.undecodable:
+            return ''
+        lost = self.lost
+        parts = [f'{len(self.damage)} damaged part{"s" * (len(self.damage) != 1)}'] if self.damage else []
+        parts += [f'{n} undecodable {t} message{"s" * (n != 1)}' for t, n in sorted(self.undecodable.items())]
+        return ', '.join(parts) + ('; messages lost: ' + ('unknown' if lost is None else f'{lost:,}'))
 
     def resolve(self, topic: str) -> str | None:
         """The recorded name of ``topic``: exact, or a relative name matched to ``/<ns>/topic`` (the
@@ -156,110 +193,107 @@ class LogReader:
         return matches[0] if matches else None
 
     def messages(self, topics: Iterable[str] | None = None, *, start_ns: int | None = None,
-                 end_ns: int | None = None) -> Iterator[LogMessage]:
-        """Messages of the given topics (all when None; relative names resolved), log time in
-        ``[start_ns, end_ns)``, in log-time order within each file and files in order."""
-        wanted = None if topics is None else [r for r in map(self.resolve, topics) if r]
+                 end_ns: int | None = None, decoded: bool = False) -> Iterator[LogMessage]:
+        """Readable messages of the given topics (all when None; relative names resolved), log time in
+        ``[start_ns, end_ns)``, in log-time order within each file and files in order. With
+        ``decoded``, each is decoded first and one that does not decode is skipped and counted."""
+        wanted = None if topics is None else {r for r in map(self.resolve, topics) if r}
         if wanted is not None and not wanted:
             return
-        for info in self._index:
-            if info.complete:
-                with open(info.path, 'rb') as stream:
-                    reader = make_reader(stream)
-                    for schema, channel, msg in reader.iter_messages(topics=wanted, starting_at=start_ns,
-                                                                     ending_before=end_ns):
-                        yield self._message(schema, channel, msg)
-            else:
-                for schema, channel, msg in _iter_stream(info.path, wanted):
-                    if (start_ns is None or msg.log_time >= start_ns) and \
-                            (end_ns is None or msg.log_time < end_ns):
-                        yield self._message(schema, channel, msg)
+        for f in self._mcaps:
+            ids = None if wanted is None else {cid for cid, c in f.channels.items() if c.topic in wanted}
+            if ids is not None and not ids:
+                continue
+            for msg in f.messages(ids, start_ns, end_ns):
+                m = self._message(f, msg)
+                if m is not None and (not decoded or self._decodes(m)):
+                    yield m
 
     def first(self, topic: str) -> LogMessage | None:
-        """The first message (in log time) of ``topic``, None when it has none."""
+        """The first decodable message (in log time) of ``topic``, None when it has none."""
         return self._edge(topic, last=False)
 
     def last(self, topic: str) -> LogMessage | None:
-        """The last message (in log time) of ``topic``, None when it has none."""
+        """The last decodable message (in log time) of ``topic``, None when it has none."""
         return self._edge(topic, last=True)
 
     # -- internals ----------------------------------------------------------------------------------
+    def _on_damage(self, damage: Damage) -> None:
+        self.damage.append(damage)
+        warnings.warn(str(damage), DamagedLogWarning, stacklevel=3)
+
     def _find_files(self) -> list[Path]:
         if self.path.is_file():
             return [self.path]
         if not self.path.is_dir():
             raise FileNotFoundError(f'no log at {self.path}')
-        listed = read_file_list(self.path)
-        files = listed if listed is not None else sorted(
-            self.path.glob('*.mcap'), key=lambda p: (len(p.name), p.name))
+        found = sorted(self.path.glob('*.mcap'), key=lambda p: (len(p.name), p.name))
+        try:
+            listed = read_file_list(self.path)
+        except LogFormatError as err:
+            if not found:
+                raise FileNotFoundError(f'{self.path} holds no .mcap file, and {err}') from None
+            listed = None
+            warnings.warn(f'{err}; reading the .mcap files of {self.path} instead', DamagedLogWarning, stacklevel=3)
+        if listed is not None:
+            missing = [p for p in listed if not p.is_file()]
+            if missing:
+                warnings.warn(f'{self.path}/metadata.yaml lists {", ".join(p.name for p in missing)}, which '
+                              f'{"is" if len(missing) == 1 else "are"} missing: reading the .mcap files present',
+                              DamagedLogWarning, stacklevel=3)
+                listed = None
+        files = listed if listed is not None else found
         if not files:
             raise FileNotFoundError(f'{self.path} holds no .mcap file')
         return files
-
-    def _index_file(self, path: Path) -> _FileIndex:
-        with open(path, 'rb') as stream:
-            head = stream.read(len(MAGIC))
-            # A file cut before the end of its magic (even empty) is a truncated log; anything else that
-            # does not start with the magic is not a log at all.
-            if not MAGIC.startswith(head):
-                raise LogFormatError(f'{path} is not an MCAP file (no MCAP magic at its start): not a log')
-            stream.seek(0)
-            try:
-                reader = make_reader(stream)
-                summary = reader.get_summary()
-            except READ_ERRORS:
-                summary = None
-            if summary is not None and summary.statistics is not None:
-                info = _FileIndex(path, True)
-                stats = summary.statistics
-                if stats.message_count:
-                    info.start_ns, info.end_ns = stats.message_start_time, stats.message_end_time
-                for channel in summary.channels.values():
-                    self._channels.setdefault(channel.topic, (summary.schemas[channel.schema_id], channel))
-                    info.counts[channel.topic] = info.counts.get(channel.topic, 0) + \
-                        stats.channel_message_counts.get(channel.id, 0)
-                info.metadata = {m.name: dict(m.metadata) for m in reader.iter_metadata()}
-                return info
-        return self._scan_file(path)
-
-    def _scan_file(self, path: Path) -> _FileIndex:
-        info = _FileIndex(path, False)
-        with open(path, 'rb') as stream:
-            reader = NonSeekingReader(stream, validate_crcs=True)
-            try:
-                for schema, channel, msg in reader.iter_messages(log_time_order=False):
-                    self._channels.setdefault(channel.topic, (schema, channel))
-                    info.counts[channel.topic] = info.counts.get(channel.topic, 0) + 1
-                    t = msg.log_time
-                    info.start_ns = t if info.start_ns is None else min(info.start_ns, t)
-                    info.end_ns = t if info.end_ns is None else max(info.end_ns, t)
-                    info.readable_bytes = stream.tell()
-            except READ_ERRORS:
-                pass
-        return info
 
     def _edge(self, topic: str, last: bool) -> LogMessage | None:
         name = self.resolve(topic)
         if name is None:
             return None
-        for info in (reversed(self._index) if last else self._index):
-            if not info.counts.get(name):
+        for f in (reversed(self._mcaps) if last else self._mcaps):
+            ids = {cid for cid, c in f.channels.items() if c.topic == name}
+            if not ids:
                 continue
-            if info.complete:
-                with open(info.path, 'rb') as stream:
-                    for record in make_reader(stream).iter_messages(topics=[name], reverse=last):
-                        return self._message(*record)
-            found = None
-            for found in _iter_stream(info.path, [name]):  # noqa: B007 - keep the last one
-                if not last:
-                    break
-            if found is not None:
-                return self._message(*found)
+            for msg in f.messages(ids, reverse=last):
+                m = self._message(f, msg)
+                if m is not None and self._decodes(m):
+                    return m
         return None
 
-    def _message(self, schema: Schema, channel: Channel, msg: Message) -> LogMessage:
-        decode = self._decoders.get(schema.name)
+    def _decodes(self, m: LogMessage) -> bool:
+        try:
+            m.message  # noqa: B018 - decode now
+        except UndecodableMessage as err:
+            n = self.undecodable.get(m.topic, 0)
+            self.undecodable[m.topic] = n + 1
+            if not n:
+                warnings.warn(f'{err}: skipped (further ones on this topic are counted, not shown)',
+                              DamagedLogWarning, stacklevel=4)
+            return False
+        return True
+
+    def _message(self, f: McapFile, msg: Message) -> LogMessage | None:
+        channel: Channel | None = f.channels.get(msg.channel_id)
+        schema = f.schemas.get(channel.schema_id) if channel is not None else None
+        if schema is None:
+            f.report(None, f'messages of channel {msg.channel_id}, whose channel or schema record was lost with a '
+                           'damaged chunk, skipped', f.counts.get(msg.channel_id), key=('channel', msg.channel_id))
+            return None
+        key = (id(f), schema.id)
+        decode = self._decoders.get(key)
         if decode is None:
-            decode = DecoderFactory().decoder_for(channel.message_encoding, schema)
-            self._decoders[schema.name] = decode
-        return LogMessage(channel.topic, schema.name, msg.log_time, msg.publish_time, msg.data, decode)
+            try:
+                decode = DecoderFactory().decoder_for(channel.message_encoding, schema)
+            except Exception as err:  # a damaged schema text makes the parser raise anything
+                error = f'schema {schema.name} does not parse: {err}'
+
+                def decode(_: bytes, error: str = error) -> Any:
+                    raise ValueError(error)
+            if decode is None:
+                def decode(_: bytes, encoding: str = channel.message_encoding) -> Any:
+                    raise ValueError(f'no decoder for message encoding {encoding!r}')
+            self._decoders[key] = decode
+            self._stamped[key] = schema.name in HEADER_TYPES or _is_stamped(schema)
+        return LogMessage(channel.topic, schema.name, msg.log_time, msg.publish_time, msg.data, decode,
+                          self._stamped[key])

@@ -32,11 +32,12 @@ class Series:
 
 
 def topic_series(log: LogReader, topic: str, fields: dict[str, Callable[[Any], float]]) -> Series:
-    """``fields`` extracted from every message of ``topic``; ``t`` = publish time (header stamp)."""
+    """``fields`` extracted from every message of ``topic``; ``t`` = header stamp [s] (0 for an unstamped
+    type: the caller maps those onto sim time)."""
     t, log_t, cols = [], [], {name: [] for name in fields}
-    for m in log.messages([topic]):
+    for m in log.messages([topic], decoded=True):
         msg = m.message
-        t.append(m.publish_time_ns * 1e-9)
+        t.append((m.stamp_ns or 0) * 1e-9)
         log_t.append((m.log_time_ns - log.start_ns) * 1e-9)
         for name, get in fields.items():
             cols[name].append(get(msg))

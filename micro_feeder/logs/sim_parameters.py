@@ -31,7 +31,8 @@ def parameter_value(value: Any) -> Any:
 
 def recorded_parameters(log: LogReader) -> list[dict[str, Any]]:
     """Every ``simulator/parameters`` snapshot of the log, in log order, as ``{name: value}``."""
-    return [{p.name: parameter_value(p.value) for p in m.message.new_parameters} for m in log.messages([TOPIC])]
+    return [{p.name: parameter_value(p.value) for p in m.message.new_parameters}
+            for m in log.messages([TOPIC], decoded=True)]
 
 
 def run_mode(params: Mapping[str, Any] | None) -> str:

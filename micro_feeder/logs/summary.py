@@ -78,7 +78,7 @@ def recorder_counters(log: LogReader) -> tuple[dict[str, str], str]:
     if log.recorder_info:
         return dict(log.recorder_info), 'summary'
     counters: dict[str, str] = {}
-    for m in log.messages(['/diagnostics']):
+    for m in log.messages(['/diagnostics'], decoded=True):
         for status in m.message.status:
             if status.name.startswith(RECORDER_STATUS_PREFIX):
                 counters = {kv.key: kv.value for kv in status.values}
@@ -113,9 +113,9 @@ def summarize(log: LogReader) -> LogSummary:
     pose = log.last('particle/pose')
     if pose is not None:
         p = pose.message.pose.position
-        part.stamp, part.x, part.z = pose.publish_time, p.x, p.z
+        part.stamp, part.x, part.z = (pose.stamp_ns or 0) * 1e-9, p.x, p.z
         first = log.first('particle/pose')
-        part.first_stamp, part.first_x = first.publish_time, first.message.pose.position.x
+        part.first_stamp, part.first_x = (first.stamp_ns or 0) * 1e-9, first.message.pose.position.x
     state = log.last('particle/contact_state')
     if state is not None:
         part.mode = state.message.data

@@ -56,8 +56,13 @@ class LogWriter:
         self.path = Path(path)
         self.bare = self.path.suffix == '.mcap'
         if self.bare:
+            if self.path.exists():
+                raise FileExistsError(f'{self.path} exists: give a new file name (a log is never overwritten)')
             self.path.parent.mkdir(parents=True, exist_ok=True)
         else:
+            if self.path.exists() and not self.path.is_dir():
+                raise FileExistsError(f'{self.path} exists and is not a directory: give a new directory name '
+                                      '(or a file name ending in .mcap)')
             if self.path.exists() and any(self.path.iterdir()):
                 raise FileExistsError(f'log directory {self.path} exists and is not empty')
             self.path.mkdir(parents=True, exist_ok=True)
@@ -151,7 +156,8 @@ class LogWriter:
             name = f'{self.path.name}_{len(self._files)}.mcap'
             target = self.path / name
         self._stream = open(target, 'wb')  # noqa: SIM115 - lives until _finish_file
-        self._writer = Writer(self._stream, chunk_size=self.chunk_size, compression=CompressionType.ZSTD)
+        self._writer = Writer(self._stream, chunk_size=self.chunk_size, compression=CompressionType.ZSTD,
+                              enable_data_crcs=True)  # so that readers detect any changed byte
         self._writer.start(profile=Profile.ROS2, library=LIBRARY)
         self._files.append(FileInfo(name))
         self._schemas = {}

@@ -1,7 +1,14 @@
 """The replay node: publishes a log's messages on their topics at their recorded timing × ``rate``.
 
 Messages are published as recorded CDR bytes (no decode), each with the QoS its publisher offered when
-the log stored it (``offered_qos_profiles``; reliable, volatile, depth 100 otherwise). A player thread
+the log stored it (``offered_qos_profiles``; reliable, volatile, depth 100 otherwise), changed per topic by
+a rosbag2 QoS overrides file (``qos_profile_overrides_path``). As ``ros2 bag play`` users expect: it can
+wait for a subscriber on every replayed topic (``wait_for_subscribers``) and/or ``delay`` seconds before the
+first message, ``start_paused``, stop after ``playback_duration`` seconds of log, and, with
+``publish_clock``, publish the log's *sim* time on ``/clock`` (the latest header stamp or recorded ``/clock``
+replayed, falling back to the log time for a log with neither) with rosbag2's clock QoS (best effort,
+keep last 1). In a node namespace (``-r __ns:=/NS``) the recorded names are published under it, except
+``/clock`` and ``/diagnostics``, which are global by convention. A player thread
 sleeps until each message's due time (coarse sleep, then a short busy wait) and records its own timing
 error: actual publish time minus due time [s] (the last ``TIMING_WINDOW`` of them, with the count and the
 maximum over the whole run, so that ``loop`` runs in bounded memory). A pass that has nothing to publish
@@ -24,17 +31,24 @@ from rclpy.context import Context
 from rclpy.exceptions import ParameterException
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import QoSProfile
+from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import SetBool
 
-from ..logs.metadata import parse_qos
-from ..logs.reader import LogReader
+from ..logs.metadata import parse_qos, read_qos_overrides
+from ..logs.reader import LogMessage, LogReader
+from ..logs.writer import header_stamp_ns
+from ..progress import Progress
 from ._ros import StopFlag, message_class, qos_from_dict, spin_until
 
 DEFAULT_QOS = QoSProfile(depth=100)
+# rosbag2's /clock publisher (rclcpp::ClockQoS): best effort, volatile, keep last 1.
+CLOCK_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE)
+CLOCK_TYPES = ('rosgraph_msgs/msg/Clock', 'rosgraph_msgs/Clock')
+FIRST_STAMP_SEARCH = 10_000  # messages looked at for the first sim time before playing
+GLOBAL_TOPICS = ('/clock', '/diagnostics', '/rosout', '/parameter_events', '/tf', '/tf_static')
 BUSY_WAIT = 0.002  # s: last stretch before a due time spent polling the clock instead of sleeping
 TIMING_WINDOW = 100_000  # timing errors kept for the percentiles (the latest ones)
 
@@ -66,17 +80,36 @@ class Replay(Node):
         self.declare_parameter('publish_clock', False, _descriptor(
             'publish the playback log time on /clock (the recorded /clock is then not replayed)', b))
         self.declare_parameter('clock_frequency', 100.0, _descriptor('/clock rate [Hz]', d, (1.0, 1000.0)))
+        self.declare_parameter('delay', 0.0, _descriptor('wait this long [s] before the first message', d,
+                                                         (0.0, 3600.0)))
+        self.declare_parameter('wait_for_subscribers', False, _descriptor(
+            'before the first message, wait until every replayed topic has a subscriber', b))
+        self.declare_parameter('start_paused', False, _descriptor('start paused (replay/pause false resumes)', b))
+        self.declare_parameter('playback_duration', 0.0, _descriptor(
+            'replay only this long [s] of the log from start_offset; 0 = to the end', d, (0.0, 1e9)))
+        self.declare_parameter('qos_profile_overrides_path', '', _descriptor(
+            'rosbag2 QoS overrides file: topic -> QoS policies replacing the recorded ones', s))
         p = {n: self.get_parameter(n).value for n in
-             ('log', 'rate', 'loop', 'start_offset', 'topics', 'remap', 'publish_clock', 'clock_frequency')}
+             ('log', 'rate', 'loop', 'start_offset', 'topics', 'remap', 'publish_clock', 'clock_frequency', 'delay',
+              'wait_for_subscribers', 'start_paused', 'playback_duration', 'qos_profile_overrides_path')}
         if not p['log']:
             raise ValueError('parameter "log" is required (the log to replay)')
         self.log = LogReader(p['log'])
         self.rate, self.loop = p['rate'], p['loop']
         self.start_ns = self.log.start_ns + int(p['start_offset'] * 1e9)
+        self.end_ns = self.start_ns + int(p['playback_duration'] * 1e9) if p['playback_duration'] else None
+        self.delay, self.wait_for_subscribers = p['delay'], p['wait_for_subscribers']
         wanted = [t for t in p['topics'] if t]
         names = [self._recorded(t, 'topic') for t in wanted] if wanted else list(self.log.topics)
+        self._read = list(names)        # what the player reads: with publish_clock, the recorded /clock too
         if p['publish_clock']:
             names = [n for n in names if n != '/clock']
+            if '/clock' in self.log.topics and '/clock' not in self._read:
+                self._read.append('/clock')
+        overrides = {}
+        if p['qos_profile_overrides_path']:
+            overrides = {self._recorded(t, 'QoS override for'): profile for t, profile
+                         in read_qos_overrides(p['qos_profile_overrides_path']).items()}
         remap = {}
         for rule in (r for r in p['remap'] if r):
             source, sep, target = rule.partition(':=')
@@ -88,23 +121,28 @@ class Replay(Node):
         for name in names:
             topic = self.log.topics[name]
             offered = parse_qos(topic.metadata.get('offered_qos_profiles', ''))
-            qos = qos_from_dict(offered[0], DEFAULT_QOS) if offered else DEFAULT_QOS
-            self._outputs[name] = self.create_publisher(message_class(topic.type), remap.get(name, name), qos)
+            profile = {**(offered[0] if offered else {}), **overrides.get(name, {})}
+            qos = qos_from_dict(profile, DEFAULT_QOS)
+            self._outputs[name] = self.create_publisher(message_class(topic.type), remap.get(name, self._output(name)),
+                                                        qos)
         self.timing_errors: deque[float] = deque(maxlen=TIMING_WINDOW)  # the latest ones [s]
         self.timing_count = 0  # over the whole run
         self.timing_max = float('-inf')  # over the whole run [s]
         self.published = 0
         self.error: str | None = None  # why the replay stopped early (a pass had nothing to publish)
+        self.failure: str | None = None  # why the player thread died (a bug or an unreadable log)
         self._start_offset = p['start_offset']
         self.finished = Future()
         self.playback_ns = self.start_ns
-        self._paused_since: float | None = None
+        # The latest header stamp or recorded /clock replayed [ns]; before the first message, the first one due.
+        self.sim_ns: int | None = self._first_stamp() if p['publish_clock'] else None
+        self._paused_since: float | None = time.monotonic() if p['start_paused'] else None
         self._pause_shift = 0.0
         self._stop = threading.Event()
         self._lock = threading.Lock()
         self.create_service(SetBool, 'replay/pause', self._on_pause)
         if p['publish_clock']:
-            self._clock_pub = self.create_publisher(Clock, '/clock', 10)
+            self._clock_pub = self.create_publisher(Clock, '/clock', CLOCK_QOS)
             self.create_timer(1.0 / p['clock_frequency'], self._publish_clock)
         self._thread = threading.Thread(target=self._play, name='replay-player', daemon=True)
 
@@ -117,21 +155,69 @@ class Replay(Node):
                              f'(it has {", ".join(sorted(self.log.topics)) or "no topic"})')
         return resolved
 
+    @staticmethod
+    def _stamp(m: LogMessage) -> int | None:
+        """The sim time a message carries: its header stamp, or a recorded /clock's time; None for neither."""
+        return m.stamp_ns if m.stamped else header_stamp_ns(m.data) if m.type in CLOCK_TYPES else None
+
+    def _first_stamp(self) -> int | None:
+        """The sim time of the first stamped message from ``start_offset`` (None: the log has none early on)."""
+        for i, m in enumerate(self.log.messages(self._read, start_ns=self.start_ns, end_ns=self.end_ns)):
+            if (stamp := self._stamp(m)) is not None or i >= FIRST_STAMP_SEARCH:
+                return stamp
+        return None
+
+    def _output(self, name: str) -> str:
+        """The name ``name`` is published under: relative to the node namespace, except the global topics."""
+        return name if name in GLOBAL_TOPICS or self.get_namespace() == '/' else name.lstrip('/')
+
+    @property
+    def end_of_playback_ns(self) -> int:
+        """Log time [ns] at which this playback ends (the log end, or start_offset + playback_duration)."""
+        return self.log.end_ns if self.end_ns is None else min(self.end_ns, self.log.end_ns)
+
     def start(self) -> None:
-        """Start playing (publishers should be matched first if nothing may be missed)."""
+        """Start playing (publishers should be matched first if nothing may be missed: wait_for_subscribers)."""
         self._thread.start()
 
+    def _before_first_message(self) -> bool:
+        """Wait for subscribers and/or the delay; False when stopped meanwhile."""
+        if self.wait_for_subscribers:
+            waiting = [n for n, pub in self._outputs.items() if not pub.get_subscription_count()]
+            if waiting:
+                self.get_logger().info(f'waiting for a subscriber on {", ".join(waiting)}')
+            while any(not pub.get_subscription_count() for pub in self._outputs.values()):
+                if self._stop.wait(0.01):
+                    return False
+        return not self._stop.wait(self.delay) if self.delay else True
+
     def _play(self) -> None:
+        try:
+            self._play_passes()
+        except Exception as err:  # a dead player must not leave the process idling: report and end
+            self.failure = f'the player stopped: {type(err).__name__}: {err}'
+        if not self.finished.done():
+            self.finished.set_result(self.failure is None)
+
+    def _play_passes(self) -> None:
+        if not self._before_first_message():
+            return
         while not self._stop.is_set():
             origin = time.monotonic()
             with self._lock:
                 self._pause_shift = 0.0
             published = 0
-            for m in self.log.messages(self.topics, start_ns=self.start_ns):
+            for m in self.log.messages(self._read, start_ns=self.start_ns, end_ns=self.end_ns):
                 due = origin + (m.log_time_ns - self.start_ns) * 1e-9 / self.rate
                 if not self._wait_until(due):
                     return
-                self._outputs[m.topic].publish(m.data)
+                stamp = self._stamp(m)
+                if stamp is not None:
+                    self.sim_ns = stamp
+                output = self._outputs.get(m.topic)
+                if output is None:       # the recorded /clock, read for the sim time only
+                    continue
+                output.publish(m.data)
                 error = time.monotonic() - due - self._pause_shift
                 self.timing_errors.append(error)
                 self.timing_count += 1
@@ -146,7 +232,6 @@ class Replay(Node):
                 break
             if not self.loop:
                 break
-        self.finished.set_result(True)
 
     def _wait_until(self, due: float) -> bool:
         """Sleep until ``due`` (+ time spent paused); False when stopped."""
@@ -180,7 +265,8 @@ class Replay(Node):
 
     def _publish_clock(self) -> None:
         msg = Clock()
-        msg.clock.sec, msg.clock.nanosec = divmod(self.playback_ns, 1_000_000_000)
+        msg.clock.sec, msg.clock.nanosec = divmod(self.playback_ns if self.sim_ns is None else self.sim_ns,
+                                                  1_000_000_000)
         self._clock_pub.publish(msg)
 
     def timing_report(self) -> str:
@@ -215,9 +301,17 @@ def main(args: list[str] | None = None, tap: Callable[[Node], None] | None = Non
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     node.start()
+    span_ms = max((node.end_of_playback_ns - node.start_ns) // 1_000_000, 1)
+    progress = Progress('replay', span_ms, 'ms of log')
+
+    def done() -> bool:
+        progress((node.playback_ns - node.start_ns) // 1_000_000)
+        return bool(stop) or node.finished.done()
+
     try:
-        spin_until(executor, lambda: bool(stop) or node.finished.done(), node.finished)
+        spin_until(executor, done, node.finished)
     finally:
+        progress.close()
         node.close()
         print(f'replay: {node.timing_report()}')
         executor.shutdown()
@@ -226,6 +320,9 @@ def main(args: list[str] | None = None, tap: Callable[[Node], None] | None = Non
     if node.error:
         print(f'replay: error: {node.error}', file=sys.stderr)
         return 2
+    if node.failure:
+        print(f'replay: error: {node.failure}', file=sys.stderr)
+        return 1
     return 0
 
 

@@ -23,9 +23,9 @@ class SurfaceParams(ParameterGroup):
     prefix = 'surface'
 
     centers: tuple = param((0.0,), 'actuator positions c_k along the feeder (frame feeder, x)', 'm',
-                           min_length=1)
+                           min_length=1, ge=-1.0, le=1.0)
     widths: tuple = param((1e-3,), 'Gaussian profile widths w_k (standard deviation of the bump)', 'm',
-                          min_length=1, gt=0)
+                          min_length=1, ge=1e-7, le=1.0)
 
     def __post_init__(self) -> None:
         super().__post_init__()

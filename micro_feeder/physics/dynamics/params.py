@@ -19,19 +19,20 @@ class IntegrationParams(ParameterGroup):
 
     method: str = param('dopri5', "'dopri5': adaptive Dormand-Prince 5(4); 'rk4': fixed-step classical "
                         "RK4 (the seed's scheme; always used by friction_logic threshold)", choices=METHODS)
-    dt: float = param(1e-4, 'rk4: the step; dopri5: the largest step', 's', gt=0, le=1e-3)
+    dt: float = param(1e-4, 'rk4: the step; dopri5: the largest step', 's', ge=1e-7, le=1e-3)
     tolerance: float = param(1e-10, 'dopri5: error allowed per step on positions (m); on velocities '
-                             'tolerance / dt (m/s)', 'm', gt=0)
+                             'tolerance / dt (m/s); at least 1e-15 m (below, double precision cannot meet it and the '
+                             'step shrinks without end)', 'm', ge=1e-15, le=1e-3)
     check_step: float = param(1e-4, 'sampling step of the stick-limit and pull-off checks while stuck '
                               '(nothing is integrated then); a dip shorter than this can be missed',
-                              's', gt=0, le=1e-3)
-    event_tolerance: float = param(1e-9, 'time tolerance of event location', 's', gt=0, le=1e-6)
+                              's', ge=1e-7, le=1e-3)
+    event_tolerance: float = param(1e-9, 'time tolerance of event location', 's', ge=1e-13, le=1e-6)
     friction_logic: str = param('events', "'events': exact stick/slip switching by event location; "
                                 "'threshold': the seed's threshold-velocity logic V_th = Q_max dt / m",
                                 choices=FRICTION_LOGICS)
     convective_terms: bool = param(True, 'keep 2 h_xt xdot + h_xx xdot^2 in the normal load (false: the '
                                    "seed's form, normal acceleration = surface acceleration)")
-    settling_time: float = param(2e-3, 'default run length beyond the end of the last stroke', 's', ge=0)
+    settling_time: float = param(2e-3, 'default run length beyond the end of the last stroke', 's', ge=0, le=1e4)
 
 
 @dataclass(frozen=True)
