@@ -45,7 +45,6 @@ def test_refused_parameter_leaves_no_log_behind(args, reason, tmp_path):
     (['simulate', '--params', 'binary.yaml'], 'binary.yaml is not text'),  # was UnicodeDecodeError
     (['run', '--duration', '0.1', '--record', 'afile'], 'afile exists'),   # was NotADirectoryError
     (['run', '--duration', '0.1', '--record', '/proc/nope/log'], '/proc'),  # was FileNotFoundError
-    (['run', '--set', 'stroke.count=100000000', '--duration', '1'], 'stroke.count'),  # was ValueError / a hang
     (['simulate', '--set', 'stroke.count=100000000'], 'stroke.count'),     # was a hang
     (['run', '--duration', 'inf'], '--duration inf'),                      # was a hang
     (['hil', '--timeout', 'inf'], '--timeout inf'),

@@ -1,10 +1,11 @@
 """What a command will cost, estimated before it starts, and the refusal of an absurd one.
 
 The estimates are deliberately simple upper-bound-ish figures from the parameters alone (no model is
-built): integration steps of an offline run, wall time of a node run, trajectory knots (and their memory)
-of the burst the actuator sends as one message. Beyond a limit the command is refused with the estimate
+built): integration steps (and the time series' memory) of an offline run, wall time of a node run. The
+actuator streams a long burst in bounded windows, so ``stroke.count`` costs a node run nothing up front.
+Beyond a limit the command is refused with the estimate
 and the parameter to change; ``--force`` starts it anyway where a user could mean it (a long run), never
-for what cannot work (an infinite duration, a trajectory that does not fit in memory).
+for what cannot work (an infinite duration).
 """
 
 from __future__ import annotations
@@ -25,9 +26,6 @@ BYTES_PER_STEP = 15 * 8       # the time series in memory: 15 columns of float64
 MAX_OFFLINE_WALL_S = 600.0    # simulate: refuse an estimate beyond 10 minutes (--force)
 MAX_OFFLINE_BYTES = 2e9       # ... or beyond 2 GB of time series (--force)
 MAX_NODE_WALL_S = 24 * 3600.0  # run/hil: refuse beyond a day of wall time (--force)
-KNOTS_PER_STROKE = 40         # the actuator's default knots_per_stroke
-MAX_KNOTS = 2_000_000         # knots x actuators in one trajectory message (~48 MB per actuator at the limit)
-HARD_MAX_KNOTS = 50_000_000   # beyond this not even --force (several GB in one message)
 
 
 def _value(flat: Mapping[str, Any], name: str) -> Any:
@@ -74,10 +72,9 @@ def check_cost(args: argparse.Namespace, flat: Mapping[str, Any]) -> None:
     duration = getattr(args, 'duration', None)
     _check_duration('--duration', duration)
     _check_duration('--timeout', getattr(args, 'timeout', None))
-    if command in ('run', 'hil'):
-        _check_knots(flat, force)
+    if command == 'run':
         wall = None
-        if command == 'run' and duration is not None:
+        if duration is not None:
             rtf = getattr(args, 'real_time_factor', 1.0)
             wall = duration / rtf if rtf and rtf > 0 else None
         if wall is not None and wall > MAX_NODE_WALL_S and not force:
@@ -100,24 +97,6 @@ def check_new_log_path(path: str) -> None:
         parent = parent.parent
     if not parent.is_dir() or not os.access(parent, os.W_OK | os.X_OK):
         raise CommandError(f'--record {path}: cannot create it: {parent} is not a writable directory')
-
-
-def _check_knots(flat: Mapping[str, Any], force: bool) -> None:
-    count = _number(flat, 'stroke.count')
-    actuators = len(_value(flat, 'surface.centers') or [0])
-    if count is None:
-        return
-    knots = count * KNOTS_PER_STROKE * actuators
-    size = knots * 3 * 8 / 1e6
-    text = (f'stroke.count = {count:g} gives one trajectory of about {knots:.3g} knots x actuators '
-            f'(~{size:.3g} MB in one message, built and parsed at once)')
-    if knots > HARD_MAX_KNOTS:
-        raise CommandError(f'{text}: too large to send; lower stroke.count (at most '
-                           f'{HARD_MAX_KNOTS // (KNOTS_PER_STROKE * actuators):,} strokes per burst here) and send '
-                           'several bursts')
-    if knots > MAX_KNOTS and not force:
-        raise CommandError(f'{text}: lower stroke.count (at most {MAX_KNOTS // (KNOTS_PER_STROKE * actuators):,} '
-                           'without --force) or add --force if you mean it')
 
 
 def _check_offline(flat: Mapping[str, Any], duration: float | None, force: bool) -> None:

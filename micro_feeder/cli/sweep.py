@@ -16,7 +16,7 @@ from tqdm import tqdm
 from ..explore.designs import DESIGNS, Grid, RunPlan, Sampled, parse_axis, parse_perturbation, parse_range
 from ..explore.evaluate import RESULT_COLUMNS, Job, model_for
 from ..explore.runners import Runner, RunnerError
-from ..explore.sweep import MAX_RUNS, PointSummary, base_values, estimate_seconds, run_plan, too_big
+from ..explore.sweep import PointSummary, base_values, estimate_seconds, run_plan, too_big
 from ..physics.parameters import ParameterError
 from ..settings import SettingsError
 from . import CommandError
@@ -56,8 +56,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help='with --perturb: Monte Carlo runs per point (default 100)')
     parser.add_argument('--seed', type=int, default=0, help='seed of --samples and --perturb draws (default 0)')
     add_runner_options(parser)
-    parser.add_argument('--force', action='store_true',
-                        help=f'run even when the sweep is huge (more than {MAX_RUNS:,} runs or over an hour)')
     parser.set_defaults(func=run)
 
 

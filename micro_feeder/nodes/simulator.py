@@ -54,7 +54,7 @@ from ..realtime.intake import CommandIntake, IntakeCounters, Outcome, Received, 
 from ..realtime.loop import GIL_SWITCH_INTERVAL, TickLoop
 from . import messages
 from ._ros import SERVICE_QOS, status_name, topic_qos
-from .commands import joint_names, parse_setpoints, parse_trajectory, start_time
+from .commands import joint_names, parse_setpoints, parse_trajectory_cdr, start_time
 from .parameters import check_changes, declare, model_specs, values
 from .spin import spin_node
 from .stepper import Stepper, build_model
@@ -356,13 +356,14 @@ class Simulator(Node):
 
     def _parse(self, received: Received) -> tuple[str, Any]:
         """A checked command for the current model, or ValueError with the reason (no lock needed)."""
+        stepper = self._stepper
+        if received.topic == 'actuator/trajectory':     # knots read from the bytes with numpy
+            joints = joint_names(stepper.model.n_actuators)
+            return received.topic, parse_trajectory_cdr(received.data, joints, stepper.limits)
         try:
             msg = deserialize_message(received.data, COMMAND_TYPES[received.topic])
         except Exception as err:  # rclpy raises several types for malformed bytes
             raise ValueError(f'{received.topic}: cannot deserialize: {err}') from err
-        stepper = self._stepper
-        if received.topic == 'actuator/trajectory':
-            return received.topic, parse_trajectory(msg, joint_names(stepper.model.n_actuators), stepper.limits)
         return received.topic, parse_setpoints(msg.data, stepper.model.n_actuators, stepper.limits)
 
     def _plan(self, batch: list[Received]) -> list[Outcome]:
