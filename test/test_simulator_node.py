@@ -24,7 +24,7 @@ from visualization_msgs.msg import Marker
 
 from micro_feeder.nodes._ros import SERVICE_QOS
 from micro_feeder.nodes.actuator import sample_waveform
-from micro_feeder.nodes.commands import TrajectoryCommand, parse_trajectory
+from micro_feeder.nodes.commands import parse_trajectory
 from micro_feeder.nodes.messages import to_time
 from micro_feeder.nodes.simulator import Simulator, topic_qos
 from micro_feeder.nodes.stepper import Stepper, build_model
@@ -462,9 +462,10 @@ def test_reset_alone_recovers_from_a_simulation_failure(running: Rig) -> None:
     simulator pauses and reports it; ~/reset alone brings it back running from t = 0."""
     sim = running.sim
     running.wait(lambda: sim.stepper.t > 0.01, 'sim time running')
-    command = TrajectoryCommand(0.0, np.array([1e-3]), np.array([[1e-5]]), np.array([[1e300]]), None)
-    with sim._lock:
-        sim.stepper.command_trajectory(command)
+    with sim._lock:     # straight into the schedule: the stepper's checks refuse such a stroke
+        t = sim.stepper.t
+        sim.stepper.schedule.command_trajectory(t, np.array([t + 1e-3]), np.array([[1e-5]]), np.array([[1e300]]),
+                                                None)
     running.wait(lambda: sim.error, 'the simulation failure')
     assert sim.paused
     assert not running.probe.pause(running.executor, False).success         # no resuming past a failure

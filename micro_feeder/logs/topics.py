@@ -1,4 +1,4 @@
-"""The micro_feeder topics of DESIGN.md §3, with their types and the QoS their publishers offer.
+"""The micro_feeder topics (docs/interface.md), with their types and the QoS their publishers offer.
 
 Plain data (no rclpy) so that the logs library, the nodes and the tests share one table. Names are
 relative (``particle/pose``) so that a node namespace applies; ``/clock`` and ``/diagnostics`` are

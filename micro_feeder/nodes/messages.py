@@ -1,6 +1,6 @@
 """Building the simulator's messages from a physics :class:`Observation` (pure functions, no node).
 
-Frames (DYNAMICS.md §1, REP 103): ``feeder`` has x along the feeder, z up, y to the left; ``contact`` sits
+Frames (docs/dynamics.md §1, REP 103): ``feeder`` has x along the feeder, z up, y to the left; ``contact`` sits
 at the part with x along the surface tangent and z along its normal, tilted by θ = atan(h_x) about y.
 """
 

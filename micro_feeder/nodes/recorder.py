@@ -1,6 +1,6 @@
 """The recorder node: subscribes in serialized form and writes an MCAP log (rosbag2 layout).
 
-Topics default to every micro_feeder topic of DESIGN.md §3 plus ``/clock`` and ``/diagnostics``,
+Topics default to every micro_feeder topic (docs/interface.md) plus ``/clock`` and ``/diagnostics``,
 resolved against the node's namespace. Known topics are subscribed at start with the QoS their
 publishers offer (transient-local ones too, so latched state is captured) and a deeper history (so a
 burst waits in the queue instead of being dropped); other configured topics are subscribed when they
