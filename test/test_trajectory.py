@@ -19,7 +19,7 @@ from micro_feeder.nodes import messages, trajectory_cdr
 from micro_feeder.nodes.actuator import StrokeStream, sample_waveform
 from micro_feeder.nodes.commands import CommandRejected, joint_names, parse_trajectory
 from micro_feeder.nodes.stepper import Stepper, build_model
-from micro_feeder.physics.trajectory import breakpoints, hermite_coefficients, sample_table, table_range
+from micro_feeder.physics.trajectory import breakpoints, sample_table, table_range
 from micro_feeder.physics.waveforms import StrokeParams, trajectory_table, waveform_table
 from micro_feeder.settings import load_settings
 
@@ -214,14 +214,3 @@ def test_a_continuous_stream_over_60_s_stays_bounded_and_seamless() -> None:
             assert error.max() <= 1e-12
     assert checked > 10 and largest <= 2000
     assert biggest < 256 * 1024          # stated (docs/interface.md): < 256 KiB per message with 4 actuators
-
-
-@pytest.mark.parametrize('kind', ['quintic', 'cubic', 'linear'])
-def test_vectorised_hermite_coefficients_equal_trajectory_table(kind: str) -> None:
-    rng = np.random.default_rng(3)
-    times = np.cumsum(rng.uniform(1e-9, 1e-3, 300))
-    pos = rng.uniform(-1e-4, 1e-4, (300, 3))
-    vel = rng.normal(size=(300, 3)) if kind != 'linear' else None
-    acc = rng.normal(size=(300, 3)) * 1e3 if kind == 'quintic' else None
-    np.testing.assert_allclose(hermite_coefficients(times, pos, vel, acc),     # x**2: square vs pow, 1 ulp
-                               trajectory_table(times, pos, vel, acc).seg_coef[:, :, :6], rtol=1e-15, atol=0)

@@ -92,23 +92,27 @@ def test_samples_pass_through_the_table():
         assert tab.evaluate(i / (len(values) * F))[0, 0] == pytest.approx(A * v, abs=1e-15)
 
 
-@pytest.mark.parametrize('with_acc', [True, False])
-def test_trajectory_hermite_through_knots(with_acc):
+@pytest.mark.parametrize('kind', ['quintic', 'cubic', 'linear'])
+def test_trajectory_hermite_through_knots(kind):
+    """Each segment meets its knots' positions (and velocities, accelerations where given) at both ends."""
     times = np.array([0.1, 0.1004, 0.1011, 0.1015])
     pos = np.array([[0.0, 1e-5], [4e-5, 2e-5], [2e-5, 0.0], [0.0, 0.0]])
-    vel = np.array([[0.0, 0.0], [0.05, -0.01], [-0.08, 0.0], [0.0, 0.0]])
-    acc = np.array([[0.0, 0.0], [30.0, 5.0], [-20.0, 0.0], [0.0, 0.0]]) if with_acc else None
+    vel = np.array([[0.0, 0.0], [0.05, -0.01], [-0.08, 0.0], [0.0, 0.0]]) if kind != 'linear' else None
+    acc = np.array([[0.0, 0.0], [30.0, 5.0], [-20.0, 0.0], [0.0, 0.0]]) if kind == 'quintic' else None
     tab = trajectory_table(times, pos, vel, acc)
     for i, t in enumerate(times[:-1]):
         got = tab.evaluate(t)
-        np.testing.assert_allclose(got[0], pos[i], atol=1e-15)
-        np.testing.assert_allclose(got[1], vel[i], atol=1e-12)
-        if with_acc:
-            np.testing.assert_allclose(got[2], acc[i], atol=1e-7)
         end = tab.evaluate(times[i + 1] - 1e-13)       # left limit at the next knot
+        np.testing.assert_allclose(got[0], pos[i], atol=1e-15)
         np.testing.assert_allclose(end[0], pos[i + 1], atol=1e-13)
+        if kind == 'linear':
+            np.testing.assert_allclose(got[1], (pos[i + 1] - pos[i]) / (times[i + 1] - t), rtol=1e-9)
+            np.testing.assert_allclose(got[2], 0.0, atol=0)
+            continue
+        np.testing.assert_allclose(got[1], vel[i], atol=1e-12)
         np.testing.assert_allclose(end[1], vel[i + 1], atol=1e-7)
-        if with_acc:
+        if kind == 'quintic':
+            np.testing.assert_allclose(got[2], acc[i], atol=1e-7)
             np.testing.assert_allclose(end[2], acc[i + 1], atol=1e-3)
     np.testing.assert_allclose(tab.evaluate(0.2)[0], pos[-1])     # holds the last position
 

@@ -159,38 +159,6 @@ def burst_end_ns(params: StrokeParams) -> int:
 # ----------------------------------------------------------------------------------------------------
 # Hermite coefficients
 
-def hermite_coefficients(times: np.ndarray, pos: np.ndarray, vel: np.ndarray | None,
-                         acc: np.ndarray | None) -> np.ndarray:
-    """(actuators, knots − 1, 6) polynomial coefficients c_0..c_5 (local time from each knot) of the
-    piecewise Hermite interpolation joint_trajectory_controller runs: quintic with ``acc``, cubic with
-    ``vel`` only, linear with positions only. ``times`` (n,) s; ``pos``/``vel``/``acc`` (n, actuators).
-
-    The same formulas as :func:`~micro_feeder.physics.waveforms.trajectory_table`'s loop, for all
-    segments at once (that loop costs ~17 µs per knot: 11 ms for a 20 ms window of 1 kHz strokes)."""
-    d = np.diff(times)[:, None]
-    p0, p1 = pos[:-1], pos[1:]
-    coef = np.zeros((p0.shape[0], p0.shape[1], N_POLY))
-    coef[:, :, 0] = p0
-    if vel is None:
-        coef[:, :, 1] = (p1 - p0) / d
-        return coef.transpose(1, 0, 2)
-    v0, v1 = vel[:-1], vel[1:]
-    coef[:, :, 1] = v0
-    if acc is None:
-        coef[:, :, 2] = (3 * (p1 - p0) - (2 * v0 + v1) * d) / d ** 2
-        coef[:, :, 3] = (2 * (p0 - p1) + (v0 + v1) * d) / d ** 3
-        return coef.transpose(1, 0, 2)
-    a0, a1 = acc[:-1], acc[1:]
-    coef[:, :, 2] = a0 / 2
-    dp = p1 - p0 - v0 * d - a0 * d * d / 2
-    dv = v1 - v0 - a0 * d
-    da = a1 - a0
-    coef[:, :, 3] = (10 * dp - 4 * dv * d + da * d * d / 2) / d ** 3
-    coef[:, :, 4] = (-15 * dp + 7 * dv * d - da * d * d) / d ** 4
-    coef[:, :, 5] = (6 * dp - 3 * dv * d + da * d * d / 2) / d ** 5
-    return coef.transpose(1, 0, 2)
-
-
 # ----------------------------------------------------------------------------------------------------
 # What a trajectory does between knots
 
