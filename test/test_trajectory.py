@@ -120,6 +120,24 @@ def test_interpolated_range_equals_the_extrema_of_every_segment(kind: str) -> No
         assert high[k] == pytest.approx(max(r[1] for r in ref), abs=1e-16)
 
 
+@pytest.mark.parametrize('kind', ['quintic', 'cubic', 'linear'])
+def test_range_within_limits_is_exact_where_it_leaves_them(kind: str) -> None:
+    """table_range(within=...) skips exact extrema only for segments provably inside: wherever the range
+    leaves the limits it equals the exact one, and inside it never claims to leave them."""
+    rng = np.random.default_rng(11)
+    n = 400
+    times = np.cumsum(rng.uniform(1e-6, 1e-3, n))
+    pos = rng.uniform(-1e-4, 1e-4, (n, 3))
+    vel = rng.uniform(-0.5, 0.5, (n, 3)) if kind != 'linear' else None
+    acc = rng.uniform(-2e3, 2e3, (n, 3)) if kind == 'quintic' else None
+    table = trajectory_table(times, pos, vel, acc)
+    exact_low, exact_high = table_range(table)
+    for within in ((-2e-4, 2e-4), (-1.2e-4, 1.2e-4), (exact_low.min() + 1e-6, exact_high.max() - 1e-6)):
+        low, high = table_range(table, within)
+        assert np.all(np.where(exact_low < within[0], low == exact_low, low >= within[0]))
+        assert np.all(np.where(exact_high > within[1], high == exact_high, high <= within[1]))
+
+
 def _overshooting_trajectory() -> JointTrajectory:
     """The old actuator's stroke-pause burst around the pause: a knot resting (s̈ = 0) 50 ms before one
     with the next stroke's s̈ = 1974 m/s²: every knot is within the limits, the quintic between them
