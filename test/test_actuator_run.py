@@ -38,3 +38,23 @@ def test_run_moves_the_part_as_far_as_simulate(stroke: list[str], tmp_path: Path
     # the summary prints the distance to 1 nm; both paths integrate the same strokes
     assert float(moved.group(1)) * 1e-6 == pytest.approx(want['distance_m'], abs=1.5e-9)
     assert transitions.group(1) == ', '.join(f'{k} {v}' for k, v in want['transitions'].items())
+
+
+def test_continuous_strokes_in_run_are_the_offline_strokes(tmp_path: Path) -> None:
+    """stroke.count 0 in ``run``: the actuator streams strokes until stopped, from the first sim time it
+    sees (logged); over 0.5 s the part moves as an offline burst starting then and cut at 0.5 s does."""
+    run = subprocess.run([*CLI, 'run', '--duration', '0.5', '--set', 'stroke.count=0'], capture_output=True,
+                         text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    start = re.search(r'burst streamed from t = ([0-9.]+) s', run.stderr)
+    moved = re.search(r'moved ([-+0-9.]+) um', run.stdout)
+    transitions = re.search(r'transitions\s+(.*)', run.stdout)
+    assert start and moved and transitions, run.stdout + run.stderr
+    assert '0 rejected, 0 late' in run.stdout, run.stdout + run.stderr
+    offline = subprocess.run([*CLI, 'simulate', '--json', '--out', str(tmp_path), '--set', 'stroke.count=1000',
+                              '--set', f'stroke.delay={start.group(1)}', '--duration', '0.5'],
+                             capture_output=True, text=True, timeout=120, check=True)
+    want = json.loads(offline.stdout)
+    assert want['transitions']['stick_to_slip'] > 50, run.stdout + run.stderr
+    assert float(moved.group(1)) * 1e-6 == pytest.approx(want['distance_m'], abs=1.5e-9)
+    assert transitions.group(1) == ', '.join(f'{k} {v}' for k, v in want['transitions'].items())

@@ -196,6 +196,17 @@ def test_replacement_and_stop(stepped: Rig) -> None:
     assert stepped.sim.rejected == 0
 
 
+def test_a_trajectory_stamped_in_the_past_is_counted_late(stepped: Rig) -> None:
+    """Stamped 1 ms before the sim time it arrives at: applied from now (its earlier knots dropped), and
+    counted on /diagnostics as late, not silently."""
+    stepped.step(3)
+    stepped.send_trajectory(hold_message(0.002, [0.0, 0.010], [0.0, 40e-6]))
+    assert stepped.sim.commands.late == 1 and stepped.sim.rejected == 0
+    assert dict((v.key, v.value) for v in stepped.sim.diagnostics().values)['commands_late'] == '1'
+    stepped.send_trajectory(hold_message(0.004, [0.0, 0.010], [0.0, 40e-6]))     # in the future: on time
+    assert stepped.sim.commands.late == 1
+
+
 def _bad_trajectories() -> dict[str, JointTrajectory]:
     good = hold_message(0.0, [0.001, 0.002], [10e-6, 20e-6])
     unknown = hold_message(0.0, [0.001], [10e-6])

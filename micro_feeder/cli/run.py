@@ -53,7 +53,7 @@ def summary(sim: Any, actuator: Any, wall_s: float, log: str | None) -> str:
              f'part            {state.mode} at x = {state.x * 1e3:.6f} mm, moved {state.distance * 1e6:+.3f} um, '
              f'max speed {state.max_speed * 1e3:.3f} mm/s',
              'transitions     ' + ', '.join(f'{k} {v}' for k, v in state.transitions.items()),
-             f'commands        {actuator.bursts} bursts sent, {sim.rejected} rejected; '
+             f'commands        {actuator.bursts} bursts sent, {sim.rejected} rejected, {sim.commands.late} late; '
              f'{sim.overruns} loop overruns']
     if sim.error:
         lines.append(f'error           {sim.error}')
@@ -67,13 +67,16 @@ def run(args: argparse.Namespace) -> int:
     if args.duration is not None and not args.duration > 0:
         raise CommandError('--duration must be > 0')
     ns = namespace(args.namespace)
-    validate(flat)      # before the recorder creates the log
+    # stroke.count 0 (strokes until stopped, streamed) is the actuator's; the model's count is at least 1
+    # and unused by the simulator, whose strokes are the actuator's commands
+    model_flat = {name: value for name, value in flat.items() if not (name == 'stroke.count' and value == 0)}
+    validate(model_flat)      # before the recorder creates the log
     with live_view(args.foxglove) as viewer, ros_session(args.record, ns, viewer) as session:
         from ..nodes.actuator import Actuator
         from ..nodes.simulator import Simulator
 
         sim = session.add(lambda: Simulator(context=session.context, namespace=ns,
-                                            overrides={**flat, 'real_time_factor': args.real_time_factor}))
+                                            overrides={**model_flat, 'real_time_factor': args.real_time_factor}))
         end = sim.stop_at(args.duration) if args.duration is not None else None   # before the actuator is built
         actuator = session.add(lambda: Actuator(context=session.context, namespace=ns, overrides=flat))
         tty: TextIO | None = sys.stderr if sys.stderr.isatty() else None

@@ -55,7 +55,7 @@ NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
                                     'windows', kind='int', ge=16, le=100000), 2000),
     'stream.window': (ParamSpec('sim time one streamed message covers at most', 's', gt=0, le=10.0), 0.005),
     'stream.lead': (ParamSpec('a streamed burst is kept scheduled this far ahead of sim time', 's', gt=0, le=10.0),
-                    0.05),
+                    0.2),
 }
 COUNT_SPEC = ParamSpec('number of strokes in the burst; 0 = strokes until ~/stop (streamed)', kind='int', ge=0)
 

@@ -159,6 +159,7 @@ class Simulator(Node):
 
         self.commands = IntakeCounters()
         self._refusal_log = ThrottledLog()
+        self._late_log = ThrottledLog(label='late')
         self.steps_granted = 0
         self.states_published = 0
         self.error = ''
@@ -397,11 +398,24 @@ class Simulator(Node):
             topic, command = outcome.command
             try:
                 if topic == 'actuator/trajectory':
+                    self._note_late(command.stamp)
                     self._stepper.command_trajectory(command)
                 else:
                     self._stepper.command_setpoints(command)
             except ValueError as err:
                 self._refuse(str(err))
+
+    def _note_late(self, stamp: float) -> None:
+        """A trajectory stamped before now starts now (joint_trajectory_controller semantics): what it
+        scheduled before is lost, and a stream joined mid-stroke can throw the part. Counted, and logged
+        throttled like refusals."""
+        late = self._stepper.t - stamp
+        if stamp > 0.0 and late > 0.0:
+            self.commands.late += 1
+            self._log_refusals(self._late_log.note(
+                f'actuator/trajectory arrived {late * 1e3:.3f} ms after its stamp: its knots before sim time '
+                f'{self._stepper.t:.6f} s were dropped (the sender should schedule further ahead, e.g. the '
+                "actuator's stream.lead)"))
 
     def _acknowledge(self, topic: str) -> None:
         """``~/command_receipts``: a command arrived on ``topic`` at the current sim time."""
@@ -542,6 +556,7 @@ class Simulator(Node):
 
     def _publish_diagnostics(self) -> None:
         self._log_refusals(self._refusal_log.flush())
+        self._log_refusals(self._late_log.flush())
         self._pub_diag.publish(DiagnosticArray(header=Header(stamp=messages.to_time(self._stepper.t)),
                                                status=[self.diagnostics()]))
 

@@ -55,26 +55,32 @@ class Outcome:
 @dataclass
 class IntakeCounters:
     """Since start: messages received, coalesced (superseded before parsing), dropped (queue full),
-    refused (invalid or too large: the node's ``rejected_commands``)."""
+    refused (invalid or too large: the node's ``rejected_commands``), late (a trajectory stamped before
+    the sim time it was applied at: its knots before that time were dropped)."""
 
     received: int = 0
     coalesced: int = 0
     dropped: int = 0
     refused: int = 0
+    late: int = 0
     last_refusal: str = ''
 
     def as_items(self) -> dict[str, str]:
         return {'commands_received': str(self.received), 'commands_coalesced': str(self.coalesced),
                 'commands_dropped': str(self.dropped), 'rejected_commands': str(self.refused),
+                'commands_late': str(self.late),
                 'last_rejection': self.last_refusal}
 
 
 class ThrottledLog:
     """Repeated refusals in few lines: the first at once, then at most one summary line per ``period``
-    (s) saying how many more there were and the last reason. Returns the line to log, or None."""
+    (s) saying how many more there were and the last reason. Returns the line to log, or None.
+    ``label`` says what happened to the commands (``rejected``, ``late``)."""
 
-    def __init__(self, period: float = REFUSAL_LOG_PERIOD, clock: Callable[[], float] = time.monotonic):
+    def __init__(self, period: float = REFUSAL_LOG_PERIOD, clock: Callable[[], float] = time.monotonic,
+                 label: str = 'rejected'):
         self.period = period
+        self.label = label
         self._clock = clock
         self._next = -float('inf')
         self._unreported = 0
@@ -93,8 +99,8 @@ class ThrottledLog:
         n, self._unreported = self._unreported, 0
         self._next = now + self.period
         if n == 1:
-            return f'command rejected: {self._last}'
-        return f'{n} commands rejected in the last {self.period:g} s; last: {self._last}'
+            return f'command {self.label}: {self._last}'
+        return f'{n} commands {self.label} in the last {self.period:g} s; last: {self._last}'
 
 
 def plan(batch: list[Received], now: float, start_time: Callable[[float, float], float],
