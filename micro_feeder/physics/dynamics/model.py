@@ -167,10 +167,12 @@ class RunResult:
         return np.asarray(MODES)[self['mode'].astype(int)]
 
     def summary(self) -> dict[str, Any]:
-        """Net distance (m), final mode, transition counts, max speed (m/s), sim time (s)."""
-        return {'distance_m': self.state.distance, 'final_mode': self.state.mode,
-                'transitions': self.state.transitions, 'max_speed_mps': self.state.max_speed,
-                'sim_time_s': self.state.t}
+        """Net distance (m), whether the part settled (stuck at the end: a part still sliding or in
+        flight has not arrived, and its position is not a distance travelled), final mode, transition
+        counts, max speed (m/s), sim time (s)."""
+        return {'distance_m': self.state.distance, 'settled': self.state.mode == 'stuck',
+                'final_mode': self.state.mode, 'transitions': self.state.transitions,
+                'max_speed_mps': self.state.max_speed, 'sim_time_s': self.state.t}
 
 
 @dataclass(frozen=True)
@@ -283,11 +285,21 @@ class FeederModel:
         events, _ = self._integrate(state, t_target, source, record=False)
         return events
 
+    def settle(self, state: FeederState, source: StrokeTable | StrokeSchedule | None = None,
+               max_time: float | None = None, step: float | None = None) -> list[Event]:
+        """Integrate ``state`` on until the part is stuck again (at rest once the strokes have ended),
+        for at most ``max_time`` (s, default ``integration.settle_max``) more, in pieces of ``step`` (s,
+        default ``integration.settling_time`` or 1 ms); returns the events. Whether it settled:
+        ``state.mode == 'stuck'`` afterwards."""
+        return self._settle(state, source, max_time, step, record=False)[0]
+
     def run(self, duration: float | None = None, source: StrokeTable | StrokeSchedule | None = None,
             state: FeederState | None = None, output_step: float | None = None) -> RunResult:
-        """Simulate from ``state`` (default: the initial state) for ``duration`` (default
-        :meth:`default_duration`) and return the time series: one row per integration step and per
-        event, plus (with ``output_step``, s) rows at least every ``output_step`` for smooth plots."""
+        """Simulate from ``state`` (default: the initial state) for ``duration`` and return the time
+        series: one row per integration step and per event, plus (with ``output_step``, s) rows at least
+        every ``output_step`` for smooth plots. With no ``duration`` the run lasts
+        :meth:`default_duration` and then goes on until the part is stuck again (:meth:`settle`, at most
+        ``integration.settle_max`` more): the summary's ``settled`` says whether it came to rest."""
         state = self.initial_state() if state is None else state
         t_end = state.t + (self.default_duration() if duration is None else duration)
         rows = [self._observe_row(state, source)[0]]
@@ -298,7 +310,24 @@ class FeederModel:
             chunk_events, recorded = self._integrate(state, t_stop, source, record=True)
             events += chunk_events
             rows += recorded
+        if duration is None:
+            chunk_events, recorded = self._settle(state, source, None, output_step, record=True)
+            events += chunk_events
+            rows += recorded
         return RunResult(self.columns(), np.vstack(rows), events, state)
+
+    def _settle(self, state: FeederState, source: StrokeTable | StrokeSchedule | None, max_time: float | None,
+                step: float | None, record: bool) -> tuple[list[Event], list[np.ndarray]]:
+        max_time = self.integration.settle_max if max_time is None else max_time
+        step = step or self.integration.settling_time or 1e-3
+        t_cap = state.t + max_time
+        events: list[Event] = []
+        rows: list[np.ndarray] = []
+        while state.mode != 'stuck' and state.t < t_cap:
+            chunk_events, recorded = self._integrate(state, min(state.t + step, t_cap), source, record)
+            events += chunk_events
+            rows += recorded
+        return events, rows
 
     def columns(self) -> tuple[str, ...]:
         """Names of the recorded columns (then ``stroke_k`` per actuator)."""

@@ -33,6 +33,9 @@ class IntegrationParams(ParameterGroup):
     convective_terms: bool = param(True, 'keep 2 h_xt xdot + h_xx xdot^2 in the normal load (false: the '
                                    "seed's form, normal acceleration = surface acceleration)")
     settling_time: float = param(2e-3, 'default run length beyond the end of the last stroke', 's', ge=0, le=1e4)
+    settle_max: float = param(1.0, 'a run with no duration goes on past its default length until the part is '
+                              'stuck again, for at most this much more sim time (then it is reported not settled)',
+                              's', ge=0, le=1e4)
 
 
 @dataclass(frozen=True)
