@@ -74,9 +74,9 @@ def run(args: argparse.Namespace) -> int:
     model.run(duration=1e-6)              # load the compiled kernel (numba cache) before timing
     started = time.perf_counter()
     try:
-        duration = model.default_duration() if args.duration is None else args.duration
-        # rows every 1/200 stroke for smooth plots, at most ~5000 of them
-        result = model.run(duration=duration, output_step=max(0.005 / model.stroke.frequency, duration / 5000))
+        length = model.default_duration() if args.duration is None else args.duration
+        # rows every 1/200 stroke for smooth plots, at most ~5000 of them (over the default length)
+        result = model.run(duration=args.duration, output_step=max(0.005 / model.stroke.frequency, length / 5000))
     except SimulationError as err:
         raise CommandError(str(err)) from err
     summary = {**result.summary(), 'wall_time_s': time.perf_counter() - started}
