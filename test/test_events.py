@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 
+import numpy as np
 import pytest
 
+from micro_feeder.explore.sweep import sweep
 from micro_feeder.physics.dynamics import FeederModel
+from micro_feeder.physics.waveforms import StrokeParams, waveform_table
 
 
 def test_a_run_with_no_duration_goes_on_until_the_part_rests() -> None:
@@ -31,3 +35,89 @@ def test_settle_is_a_no_op_for_a_part_at_rest() -> None:
     assert state.mode == 'stuck'
     t = state.t
     assert model.settle(state) == [] and state.t == t
+
+
+# -- event location: dips inside a step are found ----------------------------------------------------
+
+def _bump_centre(frequency: float) -> FeederModel:
+    return FeederModel.from_settings({'particle.x0': 0.0, 'stroke.count': 1, 'stroke.frequency': frequency})
+
+
+def take_off_frequency() -> float:
+    """At the bump centre (h_x = 0) the part leaves when the surface's downward acceleration A/2 (2πf)²
+    exceeds g + F_po/m (closed form)."""
+    m = _bump_centre(1000.0)
+    lift = m.particle.gravity + m.contact_model.pull_off_n / m.particle.mass
+    return math.sqrt(lift / (m.stroke.amplitude / 2)) / (2 * math.pi)
+
+
+def _take_offs_on_every_path(frequency: float) -> list[int]:
+    model = _bump_centre(frequency)
+    end = model.stroke.burst_end_s()
+    whole = model.initial_state()
+    model.advance(whole, end)
+    ticks = model.initial_state()
+    for i in range(1, math.ceil(end / 1e-3) + 1):
+        model.advance(ticks, min(i * 1e-3, end))
+    chunks = model.initial_state()
+    for t in [*np.sort(np.random.default_rng(5).uniform(0.0, end, 7)).tolist(), end]:
+        model.advance(chunks, t)
+    output = model.run(duration=end, output_step=3.7e-5).state
+    return [s.transitions['take_off'] for s in (whole, ticks, chunks, output)]
+
+
+@pytest.mark.parametrize('relative', [-1e-5, 1e-5])
+def test_bump_centre_take_off_is_decided_at_the_closed_form_threshold(relative: float) -> None:
+    """f*(1 ± 1e-5): no take-off just below, a take-off just above, through one advance, 1 ms ticks,
+    random chunks, output steps and a sweep (the dip lasts ~1e-6 of a period: far shorter than a step)."""
+    frequency = take_off_frequency() * (1 + relative)
+    expected = 0 if relative < 0 else 1
+    assert _take_offs_on_every_path(frequency) == [expected] * 4
+    flat = {'particle.x0': 0.0, 'stroke.count': 1}
+    (row,) = sweep(flat, 'stroke.frequency', [frequency], 1, None)
+    assert row['take_off'] == expected
+
+
+def _coulomb_plate(frequency: float, periods: int) -> FeederModel:
+    """Flat surface shaken along x at Γ = 1.05: base acceleration 1.05 μ sin 2πft, μ = Q_max(W)/m."""
+    model = FeederModel()
+    tables = model.contact_model.tables
+    mu = float(np.interp(model.particle.weight_n, tables.load_n, tables.q_max_n)) / model.particle.mass
+    omega = 2 * math.pi * frequency
+    base = waveform_table(StrokeParams(waveform='sine', amplitude=1.05 * mu / omega ** 2, frequency=frequency,
+                                       count=periods), 1)
+    return model.replace(stroke=model.stroke.replace(amplitude=0.0), base_acceleration=base)
+
+
+@pytest.mark.parametrize('frequency', [50.0, 500.0, 2000.0, 5000.0])
+def test_coulomb_plate_slips_twice_per_period(frequency: float) -> None:
+    """|a| exceeds μ around each peak of the shaking: exactly two slips per period, at any frequency (with
+    tests at step ends only, none of them was found at 2 and 5 kHz)."""
+    model = _coulomb_plate(frequency, 20)
+    state = model.initial_state()
+    model.advance(state, 20 / frequency + 1e-3)
+    assert state.transitions['stick_to_slip'] == 40 and state.transitions['slip_to_stick'] == 40
+
+
+def _slip_onset(**integration: float) -> float:
+    """Lowest frequency (Hz) at which the default part slips in one stroke, by bisection to 1e-4 Hz."""
+    base = FeederModel()
+    model = base.replace(integration=base.integration.replace(**integration))
+    low, high = 600.0, 800.0
+
+    def slips(frequency: float) -> bool:
+        m = model.replace(stroke=model.stroke.replace(frequency=frequency, count=1))
+        state = m.initial_state()
+        m.advance(state, m.stroke.burst_end_s())
+        return state.transitions['stick_to_slip'] > 0
+
+    assert not slips(low) and slips(high)
+    while high - low > 1e-4:
+        mid = 0.5 * (low + high)
+        low, high = (low, mid) if slips(mid) else (mid, high)
+    return high
+
+
+def test_slip_onset_is_found_within_a_hundredth_of_a_hertz_of_its_converged_value() -> None:
+    converged = _slip_onset(dt=1e-6, check_step=1e-6, tolerance=1e-14)
+    assert _slip_onset() == pytest.approx(converged, abs=0.01)
