@@ -2,7 +2,7 @@
 
 Plain functions over numpy arrays so that numba compiles them (``NUMBA_DISABLE_JIT=1`` runs the very
 same code as Python). The public, documented API is :mod:`micro_feeder.physics.dynamics.model`; this
-module is its engine. Equations: DYNAMICS.md §4 (and docs/dynamics.md).
+module is its engine. Equations: docs/dynamics.md §1; event location: docs/events.md.
 
 Data passed around (all SI):
 
@@ -503,7 +503,7 @@ def enter(iv: np.ndarray, fs: np.ndarray, t: float, new_mode: int, counter: int,
 
     ``grazing``: the mode being left ends (at a located event) within the event tolerance of its start,
     so it counts as never entered: this transition is not counted, and when the part returns to the
-    mode it came from, the entry into the grazed mode is uncounted too (DYNAMICS.md §4.4).
+    mode it came from, the entry into the grazed mode is uncounted too (docs/dynamics.md §1).
     """
     if grazing:
         if new_mode == iv[IV_PREV_MODE] and iv[IV_ENTRY_COUNTER] >= 0:
@@ -542,7 +542,7 @@ def sign(value: float) -> int:
 @jit
 def transition(which: int, t: float, y: np.ndarray, model: tuple, src: tuple, cur: np.ndarray,
                st: np.ndarray, aux: np.ndarray, iv: np.ndarray, fs: np.ndarray, grazing: bool) -> int:
-    """Apply the event of margin ``which`` in the current mode at (t, y) (DYNAMICS.md §4.2); returns
+    """Apply the event of margin ``which`` in the current mode at (t, y) (docs/dynamics.md §1); returns
     the event kind. ``y`` is rewritten for the new mode."""
     prm = model[0]
     mode = iv[IV_MODE]
@@ -614,7 +614,7 @@ def threshold_decision(t: float, y: np.ndarray, model: tuple, src: tuple, cur: n
 @jit
 def observe(t: float, y: np.ndarray, iv: np.ndarray, model: tuple, src: tuple, cur: np.ndarray,
             st: np.ndarray, aux: np.ndarray, dy: np.ndarray, row: np.ndarray) -> None:
-    """Fill ``row`` with the outputs of DYNAMICS.md §6 at (t, y) (columns ``COLUMN_NAMES``, then the
+    """Fill ``row`` with the outputs of docs/dynamics.md §4 at (t, y) (columns ``COLUMN_NAMES``, then the
     actuator strokes). Normal load in flight: −F_att (the attraction, continuous with N at take-off)."""
     mode = iv[IV_MODE]
     evaluate(mode, iv[IV_DIR], t, y, model, src, cur, st, aux, dy)

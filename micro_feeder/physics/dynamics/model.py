@@ -14,7 +14,7 @@ Typical use (the simulator node calls ``advance`` every tick)::
 Like MuJoCo's model/data split, a :class:`FeederModel` never changes after construction (parameters,
 contact tables, packed kernel inputs); a :class:`FeederState` holds everything that evolves, so several
 states can share one model and a state can be copied to branch a run. SI units throughout; frames of
-DYNAMICS.md §1 (``feeder``: x along the feeder, z up; ``contact``: tilted by θ = atan(h_x) about y).
+docs/dynamics.md §1 (``feeder``: x along the feeder, z up; ``contact``: tilted by θ = atan(h_x) about y).
 """
 
 from __future__ import annotations
@@ -62,7 +62,7 @@ class Event(NamedTuple):
 
 @dataclass(frozen=True)
 class Observation:
-    """What the node publishes at one instant (DYNAMICS.md §6), SI units, frame ``feeder``.
+    """What the node publishes at one instant (docs/dynamics.md §4), SI units, frame ``feeder``.
 
     ``theta`` is the contact-frame tilt atan(h_x) (rad) about the feeder's y axis: a pose orientation
     rotates by −θ about y, so that +x of the contact frame points up the slope when h_x > 0.
@@ -144,13 +144,13 @@ class FeederState:
 
     @property
     def transitions(self) -> dict[str, int]:
-        """Counters ``stick_to_slip``, ``slip_to_stick``, ``take_off``, ``landing`` (DYNAMICS.md §4.4)."""
+        """Counters ``stick_to_slip``, ``slip_to_stick``, ``take_off``, ``landing`` (docs/dynamics.md §1)."""
         return {name: int(self.iv[idx]) for name, idx in zip(COUNTER_NAMES, k.COUNTERS, strict=True)}
 
 
 @dataclass(frozen=True)
 class RunResult:
-    """A simulated time series: one row per accepted step and per event (DYNAMICS.md §6)."""
+    """A simulated time series: one row per accepted step and per event (docs/dynamics.md §4)."""
 
     columns: tuple[str, ...]
     data: np.ndarray
@@ -183,7 +183,7 @@ class FeederModel:
     and ``--set``) or with the parameter groups directly. ``contact_model`` may be given to reuse
     tables or to substitute test variants (any object with ``tables`` and ``pull_off_n``).
     ``base_acceleration``: an optional one-channel :class:`StrokeTable` whose s̈ (m/s²) shakes the
-    whole feeder along x (used for the flat-surface threshold check of DYNAMICS.md §7.1).
+    whole feeder along x (used for the flat-surface threshold check of docs/dynamics.md §1).
     """
 
     particle: ParticleParams = field(default_factory=ParticleParams)
@@ -335,7 +335,7 @@ class FeederModel:
         return k.COLUMN_NAMES + tuple(f'stroke_{i}' for i in range(self.n_actuators))
 
     def observe(self, state: FeederState, source: StrokeTable | StrokeSchedule | None = None) -> Observation:
-        """The outputs of DYNAMICS.md §6 at ``state.t`` (does not change the state)."""
+        """The outputs (docs/dynamics.md §4) at ``state.t`` (does not change the state)."""
         row, st = self._observe_row(state, source)
         values = dict(zip(k.COLUMN_NAMES, row[0, :k.N_FIXED_COLUMNS].tolist(), strict=True))
         values['mode'] = MODES[int(values['mode'])]

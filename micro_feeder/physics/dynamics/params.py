@@ -14,7 +14,7 @@ LANDING_VELOCITIES = ('relative', 'absolute')
 
 @dataclass(frozen=True)
 class IntegrationParams(ParameterGroup):
-    """How the motion is integrated (DYNAMICS.md §5)."""
+    """How the motion is integrated (docs/dynamics.md §3)."""
 
     prefix = 'integration'
 
@@ -44,7 +44,7 @@ class IntegrationParams(ParameterGroup):
 
 @dataclass(frozen=True)
 class DetachParams(ParameterGroup):
-    """When the part leaves the surface (DYNAMICS.md §4.2)."""
+    """When the part leaves the surface (docs/dynamics.md §1)."""
 
     prefix = 'detach'
 
@@ -54,7 +54,7 @@ class DetachParams(ParameterGroup):
 
 @dataclass(frozen=True)
 class LandingParams(ParameterGroup):
-    """What velocity a landing part keeps (DYNAMICS.md §4.2)."""
+    """What velocity a landing part keeps (docs/dynamics.md §1)."""
 
     prefix = 'landing'
 
