@@ -51,19 +51,24 @@ def take_off_frequency() -> float:
     return math.sqrt(lift / (m.stroke.amplitude / 2)) / (2 * math.pi)
 
 
-def _take_offs_on_every_path(frequency: float) -> list[int]:
-    model = _bump_centre(frequency)
-    end = model.stroke.burst_end_s()
+def advanced_three_ways(model: FeederModel, end: float, seed: int) -> list:
+    """States advanced to ``end`` (s) in one advance, in 1 ms ticks (as the node) and in random chunks."""
     whole = model.initial_state()
     model.advance(whole, end)
     ticks = model.initial_state()
     for i in range(1, math.ceil(end / 1e-3) + 1):
         model.advance(ticks, min(i * 1e-3, end))
     chunks = model.initial_state()
-    for t in [*np.sort(np.random.default_rng(5).uniform(0.0, end, 7)).tolist(), end]:
+    for t in [*np.sort(np.random.default_rng(seed).uniform(0.0, end, 11)).tolist(), end]:
         model.advance(chunks, t)
+    return [whole, ticks, chunks]
+
+
+def _take_offs_on_every_path(frequency: float) -> list[int]:
+    model = _bump_centre(frequency)
+    end = model.stroke.burst_end_s()
     output = model.run(duration=end, output_step=3.7e-5).state
-    return [s.transitions['take_off'] for s in (whole, ticks, chunks, output)]
+    return [s.transitions['take_off'] for s in (*advanced_three_ways(model, end, 5), output)]
 
 
 @pytest.mark.parametrize('relative', [-1e-5, 1e-5])
@@ -150,14 +155,7 @@ def test_chunking_gives_one_answer(changes: dict) -> None:
     are held to the counts and 1e-3 relative until the step sequence no longer depends on the chunks."""
     model = FeederModel.from_settings({'stroke.count': 2, **changes})
     end = model.default_duration()
-    whole = model.initial_state()
-    model.advance(whole, end)
-    ticks = model.initial_state()
-    for i in range(1, math.ceil(end / 1e-3) + 1):
-        model.advance(ticks, min(i * 1e-3, end))
-    chunks = model.initial_state()
-    for t in [*np.sort(np.random.default_rng(len(changes)).uniform(0.0, end, 11)).tolist(), end]:
-        model.advance(chunks, t)
+    whole, ticks, chunks = advanced_three_ways(model, end, len(changes))
     for state in (whole, ticks, chunks):
         model.settle(state)
     output = model.run(output_step=end / 37).state
