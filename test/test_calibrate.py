@@ -30,7 +30,7 @@ from micro_feeder.settings import known_parameters
 STEP = 1e-4          # s per simulator/step
 STEPS = 80           # 6 strokes at 1.2 kHz (5 ms), then 3 ms at rest
 TRUE = {'contact.friction_scale': 0.0135, 'particle.x0': 0.62e-3}     # defaults: 0.010814, 0.5e-3
-TIMEOUT = 10.0
+TIMEOUT = 60.0
 
 
 def _record(context: Context, path: Path, stroke: StrokeParams) -> None:

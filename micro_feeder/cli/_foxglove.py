@@ -24,7 +24,8 @@ def add_foxglove_option(parser: argparse.ArgumentParser) -> None:
 @contextlib.contextmanager
 def live_view(spec: str | None) -> Iterator[Any]:
     """A started :class:`micro_feeder.viz.viewer.Viewer` for ``--foxglove`` (None without the option);
-    its summary goes to stderr when it stops. Raises :class:`CommandError` when it cannot listen."""
+    its summary goes to stderr when it stops. Raises :class:`CommandError` when it cannot listen. Where to
+    connect is said by :func:`announce`, once the nodes are tapped."""
     if spec is None:
         yield None
         return
@@ -35,13 +36,21 @@ def live_view(spec: str | None) -> Iterator[Any]:
         viewer = Viewer(endpoint)
     except (ValueError, ViewerError) as err:
         raise CommandError(f'--foxglove {spec}: {err}') from err
-    print(f'foxglove: live view on {viewer.url} (Foxglove: Open connection -> Foxglove WebSocket)',
-          file=sys.stderr, flush=True)
-    if not endpoint.loopback:
-        print(f'foxglove: warning: {endpoint.host} is not a loopback address: other hosts can connect',
-              file=sys.stderr, flush=True)
     try:
         yield viewer
     finally:
         print(viewer.summary(), file=sys.stderr, flush=True)
         viewer.close()
+
+
+def announce(viewer: Any) -> None:
+    """Say where to connect (once), when every node is tapped: a client that connects while channels are
+    still being created can be refused a subscription by the server (seen with foxglove-sdk)."""
+    if viewer is None or viewer.announced:
+        return
+    viewer.announced = True
+    print(f'foxglove: live view on {viewer.url} (Foxglove: Open connection -> Foxglove WebSocket)',
+          file=sys.stderr, flush=True)
+    if not viewer.endpoint.loopback:
+        print(f'foxglove: warning: {viewer.endpoint.host} is not a loopback address: other hosts can connect',
+              file=sys.stderr, flush=True)

@@ -88,9 +88,11 @@ class RosSession:
         from rclpy.experimental import EventsExecutor
 
         from ..nodes._ros import spin_until
+        from ._foxglove import announce
         executor = EventsExecutor(context=self.context)
         for node in self.nodes:
             executor.add_node(node)
+        announce(self.viewer)
         try:
             spin_until(executor, lambda: bool(self.stop) or done() or (future is not None and future.done()),
                        future)

@@ -8,7 +8,7 @@ import os
 import re
 
 from . import CommandError
-from ._foxglove import add_foxglove_option, live_view
+from ._foxglove import add_foxglove_option, announce, live_view
 
 _NAME = re.compile(r'[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*')
 
@@ -84,4 +84,10 @@ def run(args: argparse.Namespace) -> int:
         ros_args += ['-r', f'__ns:=/{args.namespace.strip("/")}']
     argv = ['replay', '--ros-args', *ros_args]
     with live_view(args.foxglove) as viewer:
-        return replay_main(argv) if viewer is None else replay_main(argv, tap=viewer.tap)
+        if viewer is None:
+            return replay_main(argv)
+
+        def tap(node: object) -> None:
+            viewer.tap(node)
+            announce(viewer)
+        return replay_main(argv, tap=tap)

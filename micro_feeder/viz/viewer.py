@@ -127,6 +127,7 @@ class Viewer:
 
     def __init__(self, endpoint: Endpoint, name: str = 'micro_feeder'):
         self.endpoint = endpoint
+        self.announced = False              # the CLI has told the user where to connect
         self.context = foxglove.Context()
         self._subscriptions = _Subscriptions(self)
         try:
