@@ -59,7 +59,7 @@ def test_bradley_limit_and_lennard_jones_integral():
 
 @pytest.mark.parametrize(('s', 'expected'), [(1.0, 1.180), (10.0, 1.831), (100.0, 3.560), (1000.0, 7.49)])
 def test_hertz_dmt_adhesion_values(s, expected):
-    """f(s) of eq. 10 against CONTACT_MODEL.md §6.3's computed values and an adaptive quadrature."""
+    """f(s) of eq. 10 against the values in docs/contact.md §2 and an adaptive quadrature."""
 
     def integrand(t):
         g = t - (1 - t * t) * math.atan(t)

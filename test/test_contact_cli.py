@@ -1,5 +1,5 @@
 """``micro-feeder contact`` end to end, checked against an independent implementation of
-CONTACT_MODEL.md written here with scipy's adaptive quadrature and root finding only."""
+docs/contact.md written here with scipy's adaptive quadrature and root finding only."""
 
 import json
 import math
@@ -20,7 +20,7 @@ def run_cli(*args: str) -> subprocess.CompletedProcess:
 
 
 class IndependentKE:
-    """CONTACT_MODEL.md eqs. 1, 6-13 by adaptive quadrature, in SI units."""
+    """docs/contact.md §2-3 by adaptive quadrature, in SI units."""
 
     def __init__(self, sigma, psi, hardness, poisson, delta_gamma, beta, epsilon, c_a, q_scale, law,
                  mass, area=1e-8, gravity=9.81):

@@ -1,4 +1,4 @@
-"""ContactModel: the reference numbers of CONTACT_MODEL.md §12, the seed's d(F) fit, the inverse d(F)."""
+"""ContactModel: the reference numbers of docs/contact.md §5, the seed's d(F) fit, the inverse d(F)."""
 
 import numpy as np
 import pytest
@@ -47,7 +47,7 @@ def test_ke_literature_reference_numbers(literature):
 
 
 def test_implied_geometry(seed, literature):
-    """R = 47.0 um from psi and E; eta = 4.25e10 / m^2 for beta = 0.04; Tabor 3.9 (CONTACT_MODEL.md §4)."""
+    """R = 47.0 um from psi and E; eta = 4.25e10 / m^2 for beta = 0.04; Tabor 3.9 (docs/contact.md §1)."""
     assert literature.asperity_radius_m == pytest.approx(47.0e-6, rel=1e-3)
     assert literature.asperity_density_per_m2 == pytest.approx(4.25e10, rel=1e-3)
     assert literature.tabor_parameter == pytest.approx(3.9, abs=0.05)
@@ -106,7 +106,7 @@ def test_load_tables_are_monotone_and_linearly_interpolable(seed):
 
 def test_flight_attraction(seed):
     """Continuous with F_po at take-off, equal to -F(d_min + gap), decaying like gap^-2 far away;
-    ~2.9x the weight at a 1 um gap and equal to it near 1.8 um (DYNAMICS.md §4.3)."""
+    ~2.9x the weight at a 1 um gap and equal to it near 1.8 um (docs/contact.md §3, flight attraction)."""
     assert seed.attraction_at_gap(0.0) == pytest.approx(seed.pull_off_n)
     gaps = np.array([1e-10, 3e-9, 1e-7, 1e-6, 1e-4])
     np.testing.assert_allclose(seed.attraction_at_gap(gaps),

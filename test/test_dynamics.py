@@ -1,4 +1,4 @@
-"""The checks of DYNAMICS.md §7 on the particle dynamics (each can fail: closed forms, symmetry,
+"""Checks of the particle dynamics of docs/dynamics.md §1 (each can fail: closed forms, symmetry,
 convergence, energy, independent numerics; nothing compares the code with its own stored output)."""
 
 from dataclasses import dataclass

@@ -11,7 +11,7 @@ from micro_feeder.cli import main
 def test_simulate_json_csv_and_plot(tmp_path, capsys):
     assert main(['simulate', '--json', '--out', str(tmp_path), '--plot']) == 0
     summary = json.loads(capsys.readouterr().out)
-    assert set(summary) == {'distance_m', 'final_mode', 'transitions', 'max_speed_mps', 'sim_time_s',
+    assert set(summary) == {'distance_m', 'settled', 'final_mode', 'transitions', 'max_speed_mps', 'sim_time_s',
                             'wall_time_s'}
     assert set(summary['transitions']) == {'stick_to_slip', 'slip_to_stick', 'take_off', 'landing'}
     assert summary['final_mode'] == 'stuck' and summary['sim_time_s'] == pytest.approx(3e-3)

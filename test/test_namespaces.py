@@ -22,7 +22,7 @@ FEEDERS = {'/feeder1': 0.5e-3, '/feeder2': 0.3e-3}      # namespace: particle.x0
 
 def test_two_namespaced_feeders_run_side_by_side_without_crosstalk(ros_context: Context, tmp_path: Path) -> None:
     exe = shutil.which('micro-feeder', path=str(Path(sys.executable).parent))
-    runs = {ns: subprocess.Popen([exe, 'run', '--namespace', ns.strip('/'), '--duration', '2',
+    runs = {ns: subprocess.Popen([exe, 'run', '--namespace', ns.strip('/'), '--duration', '6',
                                   '--record', str(tmp_path / ns.strip('/')), '--set', f'particle.x0={x0}',
                                   '--set', f'stroke.count={2 if ns == "/feeder1" else 3}'],
                                  stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)

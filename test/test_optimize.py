@@ -87,8 +87,9 @@ def test_within_travel_uses_the_whole_stroke() -> None:
     model = FeederModel.from_settings({'stroke.waveform': 'sine', 'stroke.amplitude': 150e-6})
     low, high = stroke_range(model)
     assert low == pytest.approx(-150e-6, rel=1e-3) and high == pytest.approx(150e-6, rel=1e-3)
-    problem = Problem(Job({'stroke.waveform': 'sine', 'stroke.count': 2}), ('stroke.amplitude',), ((10e-6, 150e-6),),
-                      constraints=('within-travel',))
+    problem = Problem(Job({'stroke.waveform': 'sine', 'stroke.count': 2, 'piezo.stroke_min': 0.0}),
+                      ('stroke.amplitude',), ((10e-6, 150e-6),), constraints=('within-travel',))
+    assert problem.evaluate([150e-6])[1]['settled']
     assert problem.evaluate([150e-6])[1]['violation'] > 0                   # below piezo.stroke_min = 0
     assert problem.evaluate([150e-6])[0] >= 1e12
 

@@ -495,3 +495,20 @@ def test_every_one_of_200_asynchronous_step_calls_is_answered(stepped: Rig) -> N
     stepped.wait(lambda: all(f.done() for f in futures), '200 answers', timeout=30)
     assert all(f.result().success for f in futures)
     assert stepped.sim.stepper.t == pytest.approx(200 * STEP, abs=1e-12) and stepped.sim.steps_granted == 200
+
+
+@pytest.mark.parametrize('relative', [-1e-5, 1e-5])
+def test_stepped_node_decides_the_bump_centre_take_off_at_the_closed_form_threshold(ros_context: Context,
+                                                                                     relative: float) -> None:
+    """At the bump centre the part leaves when A/2 (2πf)² > g + F_po/m: the node, stepped 1 ms at a time
+    on the actuator's trajectory of one stroke at f*(1 ± 1e-5), decides it as the offline model does."""
+    model = build_model({'particle.x0': 0.0})
+    lift = model.particle.gravity + model.contact_model.pull_off_n / model.particle.mass
+    frequency = math.sqrt(lift / (model.stroke.amplitude / 2)) / (2 * math.pi) * (1 + relative)
+    rig = Rig(ros_context, start_paused=True, step_period=STEP, **{'particle.x0': 0.0})
+    try:
+        rig.send_trajectory(burst_message(0.0, StrokeParams(frequency=frequency, count=1)))
+        rig.step(3)
+        assert rig.sim.stepper.state.transitions['take_off'] == (0 if relative < 0 else 1)
+    finally:
+        rig.close()

@@ -23,11 +23,12 @@ from micro_feeder.settings import known_parameters
 
 
 def single_run(**changes: float) -> tuple[float, str, dict[str, int]]:
-    """Distance (m), final mode and counters of one plain run (2 strokes)."""
+    """Distance (m), final mode and counters of one plain run (2 strokes), continued until it settles."""
     flat = {'stroke.count': 2, **changes}
     model = FeederModel.from_settings(flat)
     state = model.initial_state()
     model.advance(state, model.default_duration())
+    model.settle(state)
     return state.distance, state.mode, state.transitions
 
 

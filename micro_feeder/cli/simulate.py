@@ -21,7 +21,7 @@ from ._common import add_model_options, settings_from_args
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser(
-        'simulate', help='offline run: stick / slide / flight history of the part (seed Fig. 11)',
+        'simulate', help='offline run: stick / slide / flight history of the part',
         description='Simulate the part on the actuated surface for the configured strokes and write the '
                     'time series (CSV) and, with --plot, the velocity / friction / position / mode '
                     'history.',
@@ -36,7 +36,8 @@ def add_run_options(parser: argparse.ArgumentParser, stem: str) -> None:
     add_model_options(parser)
     parser.add_argument('--duration', type=float, metavar='SECONDS',
                         help='simulated time per run (default: end of the last stroke + '
-                             'integration.settling_time)')
+                             'integration.settling_time, then on until the part is stuck again, at most '
+                             'integration.settle_max more)')
     parser.add_argument('--out', metavar='DIR', default='out',
                         help=f'directory for {stem}.csv (and {stem}.png); default: out')
     parser.add_argument('--json', action='store_true', help='print one JSON object and nothing else')
@@ -73,9 +74,9 @@ def run(args: argparse.Namespace) -> int:
     model.run(duration=1e-6)              # load the compiled kernel (numba cache) before timing
     started = time.perf_counter()
     try:
-        duration = model.default_duration() if args.duration is None else args.duration
-        # rows every 1/200 stroke for smooth plots, at most ~5000 of them
-        result = model.run(duration=duration, output_step=max(0.005 / model.stroke.frequency, duration / 5000))
+        length = model.default_duration() if args.duration is None else args.duration
+        # rows every 1/200 stroke for smooth plots, at most ~5000 of them (over the default length)
+        result = model.run(duration=args.duration, output_step=max(0.005 / model.stroke.frequency, length / 5000))
     except SimulationError as err:
         raise CommandError(str(err)) from err
     summary = {**result.summary(), 'wall_time_s': time.perf_counter() - started}
@@ -113,7 +114,8 @@ def format_summary(summary: dict[str, Any]) -> str:
     counts = ', '.join(f'{k} {v}' for k, v in summary['transitions'].items())
     return '\n'.join([
         f"distance     {summary['distance_m'] * 1e6:.6g} um",
-        f"final mode   {summary['final_mode']}",
+        f"final mode   {summary['final_mode']}" + ('' if summary['settled'] else
+                                                   ' (not settled: the distance is not where the part rests)'),
         f'transitions  {counts}',
         f"max speed    {summary['max_speed_mps'] * 1e3:.4g} mm/s",
         f"sim time     {summary['sim_time_s'] * 1e3:.4g} ms in {summary['wall_time_s'] * 1e3:.1f} ms wall"])

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
 
-from ..physics.dynamics import FeederModel, FeederState, SimulationError
+from ..physics.dynamics import FeederModel, SimulationError
 from ..physics.parameters import ParameterError
 
 REGIMES = ('stuck', 'slides', 'flies')
@@ -23,16 +23,6 @@ CONTACT_INPUTS = ('contact.', 'particle.mass', 'particle.area', 'gravity')
 COUNTERS = ('stick_to_slip', 'slip_to_stick', 'take_off', 'landing')
 RESULT_COLUMNS = ('distance_m', 'distance_per_stroke_m', 'settled', 'regime', 'final_mode', 'final_offset_m',
                   *COUNTERS, 'max_speed_mps', 'sim_time_s', 'error')
-
-
-def settle(model: FeederModel, state: FeederState) -> bool:
-    """Whether the part has come to rest at the end of the run: the one place that decides it.
-
-    Until the model can continue a run past the last stroke until the part sticks again
-    (``FeederModel.settle(state, max_time=...)``), a run is settled when it ends stuck; a part still
-    sliding or in flight has not arrived, and its position is not a distance travelled.
-    """
-    return state.mode == 'stuck'
 
 
 def regime(transitions: Mapping[str, int]) -> str:
@@ -82,8 +72,12 @@ def evaluate(job: Job, changes: Mapping[str, float]) -> dict[str, Any]:
     try:
         model = model_for(job, changes)
         state = model.initial_state()
-        model.advance(state, job.duration or model.default_duration())
-        settled = settle(model, state)
+        if job.duration:
+            model.advance(state, job.duration)
+        else:       # the default length, then on until the part is stuck again (integration.settle_max)
+            model.advance(state, model.default_duration())
+            model.settle(state)
+        settled = state.mode == 'stuck'
     except (ParameterError, SimulationError) as err:
         nan = math.nan
         return {'distance_m': nan, 'distance_per_stroke_m': nan, 'settled': False, 'regime': 'error',

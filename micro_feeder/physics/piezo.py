@@ -1,4 +1,4 @@
-"""Optional second-order piezo actuator between the commanded and the actual stroke (DYNAMICS.md §3).
+"""Optional second-order piezo actuator between the commanded and the actual stroke (docs/dynamics.md §2).
 
     s̈ = ω_n² (clip(s_cmd, s_min, s_max) − s) − 2 ζ ω_n ṡ,   ω_n = 2π f_n.
 

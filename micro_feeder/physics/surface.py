@@ -1,6 +1,6 @@
 """The deformed surface: one Gaussian bump per actuator, with closed-form derivatives.
 
-h(x, t) = Σ_k s_k(t) g_k(x),  g_k(x) = exp(−(x − c_k)² / (2 w_k²))  (docs/dynamics.md).
+h(x, t) = Σ_k s_k(t) g_k(x),  g_k(x) = exp(−(x − c_k)² / (2 w_k²))  (docs/dynamics.md §1).
 Material points move vertically only, so every derivative follows from the strokes (s, ṡ, s̈) and
 g, g', g'' in closed form; nothing is differentiated numerically. A bump is skipped where it is below
 ``surface.cutoff`` of its peak (error bound: docs/dynamics.md, "Far actuators").

@@ -8,11 +8,11 @@ segments repeated ``count`` times with a ``period``, starting at ``start``. Each
 which represents every shape exactly: the raised cosine, sine, half sine and asymmetric shapes (one
 trigonometric term), the jerk-limited trapezoid and the ``samples`` spline (cubics), and the quintic /
 cubic Hermite pieces of a commanded trajectory. Segment boundaries are hard breakpoints: the integrator
-ends its steps there and evaluates each side from its own segment (DYNAMICS.md §4.4). Outside the
+ends its steps there and evaluates each side from its own segment (docs/dynamics.md §2). Outside the
 repeated pattern the stroke holds a constant (``before`` / ``after``; 0 for a waveform burst, the last
 knot's position for a trajectory).
 
-Waveform conventions (DYNAMICS.md §3): a stroke lasts 1/f; ``count`` strokes follow each other
+Waveform conventions (docs/dynamics.md §2): a stroke lasts 1/f; ``count`` strokes follow each other
 separated by ``pause`` seconds; the burst starts after ``delay``; actuator k is delayed by
 ``phases[k]/f``; s = 0 outside the burst.
 """
@@ -40,7 +40,7 @@ N_COEF = 9
 
 @dataclass(frozen=True)
 class StrokeParams(ParameterGroup):
-    """The analytic stroke waveform driving every actuator (DYNAMICS.md §3)."""
+    """The analytic stroke waveform driving every actuator (docs/dynamics.md §2)."""
 
     prefix = 'stroke'
 
@@ -318,7 +318,7 @@ def hermite_coefficients(times: np.ndarray, pos: np.ndarray, vel: np.ndarray | N
 
 def trajectory_table(times: Sequence[float], positions: np.ndarray, velocities: np.ndarray | None = None,
                      accelerations: np.ndarray | None = None) -> StrokeTable:
-    """Piecewise Hermite interpolation through knots (DYNAMICS.md §3.2), holding the last position after.
+    """Piecewise Hermite interpolation through knots (docs/dynamics.md §2), holding the last position after.
 
     ``times`` (n,) absolute sim times (s), strictly increasing; ``positions``, ``velocities``,
     ``accelerations`` (n, n_actuators) in m, m/s, m/s². Quintic Hermite when accelerations are given

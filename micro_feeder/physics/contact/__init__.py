@@ -1,4 +1,4 @@
-"""Kogut–Etsion rough-surface adhesion and static friction (CONTACT_MODEL.md).
+"""Kogut–Etsion rough-surface adhesion and static friction (docs/contact.md).
 
 ``ContactModel(ContactParams(...), ParticleParams(...))`` builds the load-indexed tables the dynamics
 uses; ``ContactParams.preset_values('ke_literature')`` gives a named preset.

@@ -1,7 +1,7 @@
 """Single-asperity laws of the Kogut–Etsion model, as functions of the dimensionless interference.
 
 ``w = omega / omega_c`` is the interference over the critical (yield-inception) interference.
-References: CONTACT_MODEL.md §3 (KE02 normal load), §6 (adhesion), §7 (sliding inception).
+The laws are stated in docs/contact.md §2.
 """
 
 from __future__ import annotations
@@ -54,7 +54,7 @@ def friction_breakpoints(law: str) -> tuple[float, ...]:
 
 
 def sliding_inception_ratio(w: np.ndarray, law: str) -> np.ndarray:
-    """q = Q_max / L_c of one asperity at interference ratio w (KE03S; CONTACT_MODEL.md §7).
+    """q = Q_max / L_c of one asperity at interference ratio w (KE03S; docs/contact.md §2).
 
     ``ke``: 0.52 w^0.982 (elastic), then the cubic guess down to zero at w_lim = 4.295.
     ``elastic_only``: zero beyond w = 1 (CEB88b). ``linear_to_6``: linear from 0.52 at w = 1 to 0 at w = 6.
@@ -82,7 +82,7 @@ def _hertz_gap_shape(t: np.ndarray) -> np.ndarray:
 
 def hertz_dmt_adhesion_direct(s: np.ndarray) -> np.ndarray:
     """f(s) = F_c / (2 pi dgamma R) of an elastic (Hertz) asperity with the LJ pressure outside
-    the contact circle (CONTACT_MODEL.md eq. 10), s = omega / epsilon.
+    the contact circle (docs/contact.md §2), s = omega / epsilon.
 
     Evaluated by the trapezoid rule in u = ln t, which converges exponentially for this smooth integrand
     decaying at both ends; the node range follows the integrand's scale t_c(s).
@@ -117,7 +117,7 @@ def hertz_dmt_adhesion(s: np.ndarray) -> np.ndarray:
 
 def contacting_adhesion_ratio(w: np.ndarray, omega_c_over_eps: float, scale: float) -> np.ndarray:
     """F_c / (2 pi dgamma R) of a contacting asperity: ``scale`` x eq. 10 for w <= 110, ``scale`` x 1
-    (the flattened, fully plastic sphere) beyond (CONTACT_MODEL.md §6.3, 'hertz_dmt')."""
+    (the flattened, fully plastic sphere) beyond (docs/contact.md §2, 'hertz_dmt')."""
     w = np.asarray(w, dtype=float)
     elastic = hertz_dmt_adhesion(np.maximum(w, 0.0) * omega_c_over_eps)
     return scale * np.where(w <= W_FULLY_PLASTIC, elastic, 1.0)

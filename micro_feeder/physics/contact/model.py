@@ -1,7 +1,7 @@
 """The contact model at run time: forces vs separation, pull-off, and load-indexed tables.
 
 :class:`ContactModel` evaluates the KE integrals once on dense separation grids and answers the
-questions the dynamics asks (CONTACT_MODEL.md §10): at applied normal load N, what is the equilibrium
+questions the dynamics asks (docs/contact.md §4): at applied normal load N, what is the equilibrium
 separation d(N) on the stable branch and the maximum static friction Q_max(N); how hard does the
 surface pull a part that has flown off to a gap delta; when is the part pulled off (N <= -F_po).
 """
@@ -209,7 +209,7 @@ class ContactModel:
 
     def attraction_at_gap(self, gap_m: np.ndarray) -> np.ndarray:
         """Attraction (N, >= 0) on a flying part at gap delta >= 0 from the pull-off separation:
-        -F(d_min + delta), continuous with F_po at take-off (DYNAMICS.md §4.3)."""
+        -F(d_min + delta), continuous with F_po at take-off (docs/contact.md §3)."""
         gap = np.asarray(gap_m, dtype=float)
         if np.any(gap < 0.0) or np.any(~np.isfinite(gap)):
             raise ValueError('gap must be finite and >= 0')

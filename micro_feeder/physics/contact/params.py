@@ -1,6 +1,6 @@
 """Inputs of the Kogut–Etsion rough-surface contact model, with the named presets.
 
-See ``../shared/physics/CONTACT_MODEL.md`` §2 (symbols), §11 (choices) and §12 (presets). SI units.
+See docs/contact.md §1 (symbols), §5 (choices) and §6 (presets). SI units.
 """
 
 from __future__ import annotations
@@ -13,7 +13,7 @@ from ..parameters import ParameterError, ParameterGroup, param
 
 FRICTION_LAWS = ('ke', 'elastic_only', 'linear_to_6')
 
-# What each preset sets (CONTACT_MODEL.md §12). Fields not listed take the seed's Table 1 defaults.
+# What each preset sets (docs/contact.md §6). Fields not listed take the seed's Table 1 defaults.
 PRESETS: dict[str, dict[str, Any]] = {
     'seed_paper': {
         'beta': 0.099962, 'epsilon': 0.4e-9, 'adhesion_contact_scale': 0.36037,

@@ -1,4 +1,4 @@
-"""Rough-surface integrals of the KE model over the Gaussian summit heights (CONTACT_MODEL.md §5–7).
+"""Rough-surface integrals of the KE model over the Gaussian summit heights (docs/contact.md §3).
 
 All lengths here are in units of sigma (``d`` means d*). Forces are divided by A_n H. Each integral is a
 composite Gauss–Legendre sum on a fixed node set, so one matrix of Gaussian densities serves a whole
@@ -30,7 +30,7 @@ _INV_SQRT_2PI = 1.0 / math.sqrt(2.0 * math.pi)
 
 @dataclass(frozen=True)
 class DimensionlessInputs:
-    """The groups the dimensionless model depends on (CONTACT_MODEL.md §4)."""
+    """The groups the dimensionless model depends on (docs/contact.md §1)."""
 
     beta: float            # eta R sigma
     omega_c: float         # omega_c / sigma = 1 / psi^2

@@ -1,4 +1,4 @@
-"""The seed paper's rational curve fit of separation vs applied load (CONTACT_MODEL.md §9.3).
+"""The seed paper's rational curve fit of separation vs applied load (docs/contact.md §5).
 
 d in nm, applied load x in N; meaningful only for 0 <= x <= ~2e-5 N (the range it was fitted on).
 Used to compare the model with the seed (the plot of Fig. 6 and the tests), never for dynamics.

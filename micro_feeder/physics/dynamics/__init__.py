@@ -1,4 +1,4 @@
-"""Particle dynamics on the actuated surface (DYNAMICS.md): modes, events, integrator, stepper API.
+"""Particle dynamics on the actuated surface (docs/dynamics.md, docs/events.md): modes, events, integrator, stepper API.
 
 See :mod:`.model` for the API; :mod:`.kernel` is the compiled engine.
 """

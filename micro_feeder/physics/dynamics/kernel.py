@@ -2,7 +2,7 @@
 
 Plain functions over numpy arrays so that numba compiles them (``NUMBA_DISABLE_JIT=1`` runs the very
 same code as Python). The public, documented API is :mod:`micro_feeder.physics.dynamics.model`; this
-module is its engine. Equations: DYNAMICS.md §4 (and docs/dynamics.md).
+module is its engine. Equations: docs/dynamics.md §1; event location: docs/events.md.
 
 Data passed around (all SI):
 
@@ -28,16 +28,16 @@ import numpy as np
 from .._jit import jit, jit_inline
 from ..piezo import piezo_acceleration
 from ..surface import surface_at
-from ..waveforms import channel_value, locate_segment, segment_end
+from ..waveforms import COEF_OMEGA, channel_value, locate_segment, segment_end
 
 STUCK, SLIDING, FLYING = 0, 1, 2
 
 # prm: scalar parameters
 (P_MASS, P_GRAVITY, P_PULL_OFF, P_DT, P_EVENT_TOL, P_CONVECTIVE, P_INCLUDE_WEIGHT, P_LANDING_RELATIVE,
  P_THRESHOLD, P_PIEZO, P_PIEZO_OMEGA, P_PIEZO_ZETA, P_PIEZO_MIN, P_PIEZO_MAX, P_HAS_BASE, P_RECORD,
- P_ADAPTIVE, P_TOLERANCE, P_CHECK_STEP) = range(19)
-P_CUT = 19          # surface.cutoff as a radius u_c in widths (inf: exact full sum; docs/dynamics.md)
-N_PRM = 20
+ P_ADAPTIVE, P_TOLERANCE, P_CHECK_STEP, P_DIP_SEARCH) = range(20)
+P_CUT = 20          # surface.cutoff as a radius u_c in widths (inf: exact full sum; docs/dynamics.md)
+N_PRM = 21
 
 # iv: discrete state. IV_ENTRY_COUNTER: the counter incremented when the current mode was entered (-1
 # none), IV_PREV_MODE: the mode before it; both serve "a mode that ends within the event tolerance of
@@ -242,6 +242,19 @@ def locate_all(src: tuple, t: float, cur: np.ndarray) -> float:
 
 
 @jit
+def wave_step(src: tuple, cur: np.ndarray) -> float:
+    """Largest step (s) that keeps each margin to one local extremum per step: an eighth of the period of
+    the fastest sinusoid in the active segments (a margin mixes strokes nonlinearly, doubling their
+    frequency); inf when no segment has one."""
+    seg_coef = src[6]
+    fastest = 0.0
+    for k in range(cur.shape[0]):
+        if cur[k, 0] >= 0:
+            fastest = max(fastest, abs(seg_coef[k, cur[k, 1], COEF_OMEGA]))
+    return math.pi / (4.0 * fastest) if fastest > 0.0 else math.inf
+
+
+@jit
 def rk4_step(mode: int, direction: int, t: float, y: np.ndarray, f0: np.ndarray, h: float, model: tuple,
              src: tuple, cur: np.ndarray, st: np.ndarray, aux: np.ndarray, work: np.ndarray,
              out: np.ndarray) -> None:
@@ -369,13 +382,136 @@ def locate_root(which: int, mode: int, direction: int, t: float, h: float, y0: n
     return -1.0
 
 
+@jit_inline
+def margins_at(theta: float, mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0: np.ndarray,
+               y1: np.ndarray, f1: np.ndarray, model: tuple, src: tuple, cur: np.ndarray, st: np.ndarray,
+               aux: np.ndarray, work: np.ndarray, dense: bool) -> tuple[float, float]:
+    """Both margins at step fraction ``theta`` on the step's interpolant (as :func:`locate_root`)."""
+    yi, dy = work[9], work[10]
+    if dense:
+        dopri5_dense(theta, h, y0, f0, y1, f1, work, yi)
+    else:
+        hermite(theta, h, y0, f0, y1, f1, yi)
+    return evaluate(mode, direction, t + theta * h, yi, model, src, cur, st, aux, dy)
+
+
+@jit_inline
+def crossed(value: float, strict: bool) -> bool:
+    """A margin past its event: < 0 for the stick margin (stuck holds at |T_req| = Q_max), else ≤ 0."""
+    return value < 0.0 if strict else value <= 0.0
+
+
+@jit_inline
+def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0: np.ndarray, y1: np.ndarray,
+              f1: np.ndarray, g0: float, g1: float, e0: float, e1: float, fresh: bool, start_known: bool,
+              start_down0: bool, start_down1: bool, model: tuple, src: tuple, cur: np.ndarray, st: np.ndarray,
+              aux: np.ndarray, work: np.ndarray, dense: bool) -> tuple[float, float, float]:
+    """Step fraction of a point where a margin, positive at both ends of the step, dips past its event
+    inside it (-1 if there is none), and both margins just before the step's end.
+
+    A margin with an interior minimum decreases just after the start and increases just before the end
+    (compared at δ = min(1e-3, event_tolerance / h) inside each end; at the start, when ``start_known``,
+    the previous step's end tells, ``start_down0/1``). Its minimum is then searched (:func:`brent_dip`)
+    to the event tolerance, stopping at the first point past the event. Guarantee, under the assumption
+    that a margin has at most one local minimum within one step (docs/events.md): a dip longer than the
+    event tolerance is found, whatever the step size.
+    """
+    tol = model[0][P_EVENT_TOL] / h
+    if tol >= 0.25:
+        return -1.0, math.nan, math.nan
+    delta = min(1e-3, tol)
+    b0, b1 = margins_at(1.0 - delta, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux, work,
+                        dense)
+    if not start_known:
+        a0, a1 = margins_at(delta, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux, work, dense)
+        start_down0, start_down1 = a0 < g0, a1 < g1
+    best = 2.0
+    for which in range(2):
+        start, end = (g0, e0) if which == 0 else (g1, e1)
+        near_end, down = (b0, start_down0) if which == 0 else (b1, start_down1)
+        if not (math.isfinite(start) and math.isfinite(end)) or (which == 0 and fresh):
+            continue
+        strict = mode == STUCK and which == 0
+        if crossed(near_end, strict):
+            theta = 1.0 - delta
+        elif down and near_end < end:
+            theta = brent_dip(which, strict, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux,
+                              work, dense, tol)
+        else:
+            continue
+        if 0.0 < theta < best:
+            best = theta
+    return (best if best <= 1.0 else -1.0), b0, b1
+
+
+@jit
+def brent_dip(which: int, strict: bool, mode: int, direction: int, t: float, h: float, y0: np.ndarray,
+              f0: np.ndarray, y1: np.ndarray, f1: np.ndarray, model: tuple, src: tuple, cur: np.ndarray,
+              st: np.ndarray, aux: np.ndarray, work: np.ndarray, dense: bool, tol: float) -> float:
+    """Brent's minimisation (parabolic steps, golden-section fallback) of margin ``which`` over the step
+    (fractions 0..1) to ``tol``, returning the first fraction found past the event, or -1 when the
+    minimum stays short of it."""
+    golden = 0.3819660112501051
+    a, b = 0.0, 1.0
+    x = w = v = golden
+    fx = margins_at(x, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux, work, dense)[which]
+    if crossed(fx, strict):
+        return x
+    fw = fv = fx
+    d = e = 0.0
+    for _ in range(100):
+        xm = 0.5 * (a + b)
+        if abs(x - xm) <= 2.0 * tol - 0.5 * (b - a):
+            break
+        parabolic = False
+        if abs(e) > tol:
+            r = (x - w) * (fx - fv)
+            q = (x - v) * (fx - fw)
+            p = (x - v) * q - (x - w) * r
+            q = 2.0 * (q - r)
+            if q > 0.0:
+                p = -p
+            q = abs(q)
+            if abs(p) < abs(0.5 * q * e) and q * (a - x) < p < q * (b - x):
+                e = d
+                d = p / q
+                parabolic = True
+                if (x + d) - a < 2.0 * tol or b - (x + d) < 2.0 * tol:
+                    d = tol if xm >= x else -tol
+        if not parabolic:
+            e = (a - x) if x >= xm else (b - x)
+            d = golden * e
+        u = x + d if abs(d) >= tol else x + (tol if d > 0.0 else -tol)
+        fu = margins_at(u, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux, work, dense)[which]
+        if crossed(fu, strict):
+            return u
+        if fu <= fx:
+            if u >= x:
+                a = x
+            else:
+                b = x
+            v, w, x = w, x, u
+            fv, fw, fx = fw, fx, fu
+        else:
+            if u < x:
+                a = u
+            else:
+                b = u
+            if fu <= fw or w == x:
+                v, w = w, u
+                fv, fw = fw, fu
+            elif fu <= fv or v in (x, w):
+                v, fv = u, fu
+    return -1.0
+
+
 @jit
 def enter(iv: np.ndarray, fs: np.ndarray, t: float, new_mode: int, counter: int, grazing: bool) -> None:
     """Switch to ``new_mode`` at ``t`` and count the transition in ``iv[counter]`` (-1: not counted).
 
     ``grazing``: the mode being left ends (at a located event) within the event tolerance of its start,
     so it counts as never entered: this transition is not counted, and when the part returns to the
-    mode it came from, the entry into the grazed mode is uncounted too (DYNAMICS.md §4.4).
+    mode it came from, the entry into the grazed mode is uncounted too (docs/dynamics.md §1).
     """
     if grazing:
         if new_mode == iv[IV_PREV_MODE] and iv[IV_ENTRY_COUNTER] >= 0:
@@ -414,7 +550,7 @@ def sign(value: float) -> int:
 @jit
 def transition(which: int, t: float, y: np.ndarray, model: tuple, src: tuple, cur: np.ndarray,
                st: np.ndarray, aux: np.ndarray, iv: np.ndarray, fs: np.ndarray, grazing: bool) -> int:
-    """Apply the event of margin ``which`` in the current mode at (t, y) (DYNAMICS.md §4.2); returns
+    """Apply the event of margin ``which`` in the current mode at (t, y) (docs/dynamics.md §1); returns
     the event kind. ``y`` is rewritten for the new mode."""
     prm = model[0]
     mode = iv[IV_MODE]
@@ -488,7 +624,7 @@ def threshold_decision(t: float, y: np.ndarray, model: tuple, src: tuple, cur: n
 @jit
 def observe(t: float, y: np.ndarray, iv: np.ndarray, model: tuple, src: tuple, cur: np.ndarray,
             st: np.ndarray, aux: np.ndarray, dy: np.ndarray, row: np.ndarray) -> None:
-    """Fill ``row`` with the outputs of DYNAMICS.md §6 at (t, y) (columns ``COLUMN_NAMES``, then the
+    """Fill ``row`` with the outputs of docs/dynamics.md §4 at (t, y) (columns ``COLUMN_NAMES``, then the
     actuator strokes). Normal load in flight: −F_att (the attraction, continuous with N at take-off)."""
     mode = iv[IV_MODE]
     evaluate(mode, iv[IV_DIR], t, y, model, src, cur, st, aux, dy)
@@ -546,6 +682,7 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
     tol = prm[P_EVENT_TOL]
     threshold = prm[P_THRESHOLD] != 0.0
     adaptive = prm[P_ADAPTIVE] != 0.0 and not threshold
+    dip_search = prm[P_DIP_SEARCH] != 0.0 and not threshold
     if fs[FS_H] <= 0.0:
         fs[FS_H] = dt
     record = prm[P_RECORD] != 0.0
@@ -557,6 +694,10 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
     g0 = g1 = 0.0
     same_instant = 0
     t_last_event = math.nan
+    h_cap = 0.0
+    h_wave = math.inf
+    dip_retries = 0
+    start_known = start_down0 = start_down1 = False
     while t < t_target:
         if n_ev + 2 > ev_i.shape[0]:
             status = EVENTS_FULL
@@ -570,6 +711,7 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
         if need_eval:
             if t >= t_next:                     # a new segment (or the first): point the cursor at it
                 t_next = locate_all(src, t, cur)
+                h_wave = wave_step(src, cur)
             if threshold and mode != FLYING:
                 kind = threshold_decision(t, y, model, src, cur, st, aux, iv, fs)
                 if kind >= 0:
@@ -591,6 +733,11 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
                 h = min(fs[FS_H], dt, t_next - t, t_target - t)
             else:
                 h = min(dt if moving or threshold else prm[P_CHECK_STEP], t_next - t, t_target - t)
+            if dip_search and (error_control or not moving):     # fixed-step RK4 keeps its dt
+                h = min(h, h_wave)
+            if h_cap > 0.0:
+                h = min(h, h_cap)
+                h_cap = 0.0
             while True:
                 if error_control:
                     dopri5_step(mode, direction, t, y, f0, h, model, src, cur, st, aux, work, y1)
@@ -613,17 +760,30 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
             # stuck stays stuck while |T_req| <= Q_max; a fresh mode's margin starts at 0 by construction
             hit0 = (e0 < 0.0 and g0 >= 0.0) if mode == STUCK else (e0 <= 0.0 and (g0 > 0.0 or fresh))
             hit1 = e1 <= 0.0 and g1 > 0.0
+            near_end0 = near_end1 = math.nan
+            if not (hit0 or hit1) and dip_search and dip_retries < 4:
+                theta, near_end0, near_end1 = first_dip(
+                    mode, direction, t, h, y, f0, y1, f1, g0, g1, e0, e1, fresh, start_known, start_down0,
+                    start_down1, model, src, cur, st, aux, work, error_control)
+                if theta > 0.0:                 # a margin dips past its event inside the step: end the
+                    h_cap = theta * h           # step there (the retried step then locates the root)
+                    dip_retries += 1
+                    continue
             if not (hit0 or hit1):              # accept the step
                 t = t_next if h == t_next - t else (t_target if h == t_target - t else t + h)
                 copy_into(y, y1)
                 copy_into(f0, f1)
                 g0, g1 = e0, e1
                 iv[IV_FRESH] = 0
+                dip_retries = 0
+                # is each margin decreasing where the next step starts? (its slope at this step's end)
+                start_down0, start_down1 = near_end0 > e0, near_end1 > e1
                 fs[FS_MAX_SPEED] = max(fs[FS_MAX_SPEED], abs(y[1]))
                 if record:
                     observe(t, y, iv, model, src, cur, st, aux, work[10], rec[n_rec])
                     n_rec += 1
                 need_eval = t >= t_next or (threshold and mode != FLYING)
+                start_known = not need_eval and not math.isnan(near_end0)
                 continue
             theta = 2.0
             if hit0:
@@ -679,5 +839,7 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
             observe(t, y, iv, model, src, cur, st, aux, work[10], rec[n_rec])
             n_rec += 1
         need_eval = True
+        dip_retries = 0
+        start_known = False
     fs[FS_T] = t
     return status, n_ev, n_rec

@@ -14,7 +14,7 @@ Typical use (the simulator node calls ``advance`` every tick)::
 Like MuJoCo's model/data split, a :class:`FeederModel` never changes after construction (parameters,
 contact tables, packed kernel inputs); a :class:`FeederState` holds everything that evolves, so several
 states can share one model and a state can be copied to branch a run. SI units throughout; frames of
-DYNAMICS.md §1 (``feeder``: x along the feeder, z up; ``contact``: tilted by θ = atan(h_x) about y).
+docs/dynamics.md §1 (``feeder``: x along the feeder, z up; ``contact``: tilted by θ = atan(h_x) about y).
 """
 
 from __future__ import annotations
@@ -62,7 +62,7 @@ class Event(NamedTuple):
 
 @dataclass(frozen=True)
 class Observation:
-    """What the node publishes at one instant (DYNAMICS.md §6), SI units, frame ``feeder``.
+    """What the node publishes at one instant (docs/dynamics.md §4), SI units, frame ``feeder``.
 
     ``theta`` is the contact-frame tilt atan(h_x) (rad) about the feeder's y axis: a pose orientation
     rotates by −θ about y, so that +x of the contact frame points up the slope when h_x > 0.
@@ -144,13 +144,13 @@ class FeederState:
 
     @property
     def transitions(self) -> dict[str, int]:
-        """Counters ``stick_to_slip``, ``slip_to_stick``, ``take_off``, ``landing`` (DYNAMICS.md §4.4)."""
+        """Counters ``stick_to_slip``, ``slip_to_stick``, ``take_off``, ``landing`` (docs/dynamics.md §1)."""
         return {name: int(self.iv[idx]) for name, idx in zip(COUNTER_NAMES, k.COUNTERS, strict=True)}
 
 
 @dataclass(frozen=True)
 class RunResult:
-    """A simulated time series: one row per accepted step and per event (DYNAMICS.md §6)."""
+    """A simulated time series: one row per accepted step and per event (docs/dynamics.md §4)."""
 
     columns: tuple[str, ...]
     data: np.ndarray
@@ -167,10 +167,12 @@ class RunResult:
         return np.asarray(MODES)[self['mode'].astype(int)]
 
     def summary(self) -> dict[str, Any]:
-        """Net distance (m), final mode, transition counts, max speed (m/s), sim time (s)."""
-        return {'distance_m': self.state.distance, 'final_mode': self.state.mode,
-                'transitions': self.state.transitions, 'max_speed_mps': self.state.max_speed,
-                'sim_time_s': self.state.t}
+        """Net distance (m), whether the part settled (stuck at the end: a part still sliding or in
+        flight has not arrived, and its position is not a distance travelled), final mode, transition
+        counts, max speed (m/s), sim time (s)."""
+        return {'distance_m': self.state.distance, 'settled': self.state.mode == 'stuck',
+                'final_mode': self.state.mode, 'transitions': self.state.transitions,
+                'max_speed_mps': self.state.max_speed, 'sim_time_s': self.state.t}
 
 
 @dataclass(frozen=True)
@@ -181,7 +183,7 @@ class FeederModel:
     and ``--set``) or with the parameter groups directly. ``contact_model`` may be given to reuse
     tables or to substitute test variants (any object with ``tables`` and ``pull_off_n``).
     ``base_acceleration``: an optional one-channel :class:`StrokeTable` whose s̈ (m/s²) shakes the
-    whole feeder along x (used for the flat-surface threshold check of DYNAMICS.md §7.1).
+    whole feeder along x (used for the flat-surface threshold check of docs/dynamics.md §1).
     """
 
     particle: ParticleParams = field(default_factory=ParticleParams)
@@ -219,6 +221,7 @@ class FeederModel:
         prm[k.P_ADAPTIVE] = self.integration.method == 'dopri5'
         prm[k.P_TOLERANCE] = self.integration.tolerance
         prm[k.P_CHECK_STEP] = self.integration.check_step
+        prm[k.P_DIP_SEARCH] = self.integration.event_search == 'dips'
         prm[k.P_CUT] = self.surface.cutoff_radius
         packed = (prm, np.asarray(self.surface.centers, dtype=float),
                   np.asarray(self.surface.widths, dtype=float),
@@ -284,11 +287,21 @@ class FeederModel:
         events, _ = self._integrate(state, t_target, source, record=False)
         return events
 
+    def settle(self, state: FeederState, source: StrokeTable | StrokeSchedule | None = None,
+               max_time: float | None = None, step: float | None = None) -> list[Event]:
+        """Integrate ``state`` on until the part is stuck again (at rest once the strokes have ended),
+        for at most ``max_time`` (s, default ``integration.settle_max``) more, in pieces of ``step`` (s,
+        default ``integration.settling_time`` or 1 ms); returns the events. Whether it settled:
+        ``state.mode == 'stuck'`` afterwards."""
+        return self._settle(state, source, max_time, step, record=False)[0]
+
     def run(self, duration: float | None = None, source: StrokeTable | StrokeSchedule | None = None,
             state: FeederState | None = None, output_step: float | None = None) -> RunResult:
-        """Simulate from ``state`` (default: the initial state) for ``duration`` (default
-        :meth:`default_duration`) and return the time series: one row per integration step and per
-        event, plus (with ``output_step``, s) rows at least every ``output_step`` for smooth plots."""
+        """Simulate from ``state`` (default: the initial state) for ``duration`` and return the time
+        series: one row per integration step and per event, plus (with ``output_step``, s) rows at least
+        every ``output_step`` for smooth plots. With no ``duration`` the run lasts
+        :meth:`default_duration` and then goes on until the part is stuck again (:meth:`settle`, at most
+        ``integration.settle_max`` more): the summary's ``settled`` says whether it came to rest."""
         state = self.initial_state() if state is None else state
         t_end = state.t + (self.default_duration() if duration is None else duration)
         rows = [self._observe_row(state, source)[0]]
@@ -299,14 +312,31 @@ class FeederModel:
             chunk_events, recorded = self._integrate(state, t_stop, source, record=True)
             events += chunk_events
             rows += recorded
+        if duration is None:
+            chunk_events, recorded = self._settle(state, source, None, output_step, record=True)
+            events += chunk_events
+            rows += recorded
         return RunResult(self.columns(), np.vstack(rows), events, state)
+
+    def _settle(self, state: FeederState, source: StrokeTable | StrokeSchedule | None, max_time: float | None,
+                step: float | None, record: bool) -> tuple[list[Event], list[np.ndarray]]:
+        max_time = self.integration.settle_max if max_time is None else max_time
+        step = step or self.integration.settling_time or 1e-3
+        t_cap = state.t + max_time
+        events: list[Event] = []
+        rows: list[np.ndarray] = []
+        while state.mode != 'stuck' and state.t < t_cap:
+            chunk_events, recorded = self._integrate(state, min(state.t + step, t_cap), source, record)
+            events += chunk_events
+            rows += recorded
+        return events, rows
 
     def columns(self) -> tuple[str, ...]:
         """Names of the recorded columns (then ``stroke_k`` per actuator)."""
         return k.COLUMN_NAMES + tuple(f'stroke_{i}' for i in range(self.n_actuators))
 
     def observe(self, state: FeederState, source: StrokeTable | StrokeSchedule | None = None) -> Observation:
-        """The outputs of DYNAMICS.md §6 at ``state.t`` (does not change the state)."""
+        """The outputs (docs/dynamics.md §4) at ``state.t`` (does not change the state)."""
         row, st = self._observe_row(state, source)
         values = dict(zip(k.COLUMN_NAMES, row[0, :k.N_FIXED_COLUMNS].tolist(), strict=True))
         values['mode'] = MODES[int(values['mode'])]

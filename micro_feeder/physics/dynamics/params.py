@@ -8,12 +8,13 @@ from ..parameters import ParameterGroup, param
 
 FRICTION_LOGICS = ('events', 'threshold')
 METHODS = ('dopri5', 'rk4')
+EVENT_SEARCHES = ('dips', 'step_ends')
 LANDING_VELOCITIES = ('relative', 'absolute')
 
 
 @dataclass(frozen=True)
 class IntegrationParams(ParameterGroup):
-    """How the motion is integrated (DYNAMICS.md §5)."""
+    """How the motion is integrated (docs/dynamics.md §3)."""
 
     prefix = 'integration'
 
@@ -23,21 +24,27 @@ class IntegrationParams(ParameterGroup):
     tolerance: float = param(1e-10, 'dopri5: error allowed per step on positions (m); on velocities '
                              'tolerance / dt (m/s); at least 1e-15 m (below, double precision cannot meet it and the '
                              'step shrinks without end)', 'm', ge=1e-15, le=1e-3)
-    check_step: float = param(1e-4, 'sampling step of the stick-limit and pull-off checks while stuck '
-                              '(nothing is integrated then); a dip shorter than this can be missed',
+    check_step: float = param(1e-4, 'largest step while stuck (nothing is integrated then; with '
+                              'event_search dips, not the resolution of the stick-limit and pull-off checks)',
                               's', ge=1e-7, le=1e-3)
     event_tolerance: float = param(1e-9, 'time tolerance of event location', 's', ge=1e-13, le=1e-6)
+    event_search: str = param('dips', "'dips': a margin that dips past its event inside a step is found (its "
+                              "minimum located, docs/events.md); 'step_ends': tested where steps end only "
+                              "(faster; misses dips shorter than a step)", choices=EVENT_SEARCHES)
     friction_logic: str = param('events', "'events': exact stick/slip switching by event location; "
                                 "'threshold': the seed's threshold-velocity logic V_th = Q_max dt / m",
                                 choices=FRICTION_LOGICS)
     convective_terms: bool = param(True, 'keep 2 h_xt xdot + h_xx xdot^2 in the normal load (false: the '
                                    "seed's form, normal acceleration = surface acceleration)")
     settling_time: float = param(2e-3, 'default run length beyond the end of the last stroke', 's', ge=0, le=1e4)
+    settle_max: float = param(1.0, 'a run with no duration goes on past its default length until the part is '
+                              'stuck again, for at most this much more sim time (then it is reported not settled)',
+                              's', ge=0, le=1e4)
 
 
 @dataclass(frozen=True)
 class DetachParams(ParameterGroup):
-    """When the part leaves the surface (DYNAMICS.md §4.2)."""
+    """When the part leaves the surface (docs/dynamics.md §1)."""
 
     prefix = 'detach'
 
@@ -47,7 +54,7 @@ class DetachParams(ParameterGroup):
 
 @dataclass(frozen=True)
 class LandingParams(ParameterGroup):
-    """What velocity a landing part keeps (DYNAMICS.md §4.2)."""
+    """What velocity a landing part keeps (docs/dynamics.md §1)."""
 
     prefix = 'landing'
 
