@@ -1,5 +1,7 @@
 """The Gaussian surface: closed-form derivatives against finite differences, parameter checks."""
 
+import math
+
 import numpy as np
 import pytest
 
@@ -21,13 +23,13 @@ def strokes(t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def height(x: float, t: float) -> float:
     s, sd, sdd = strokes(t)
-    return surface_at(x, s, sd, sdd, CENTERS, WIDTHS)[0]
+    return surface_at(x, s, sd, sdd, CENTERS, WIDTHS, math.inf)[0]
 
 
 @pytest.mark.parametrize('x', [-1.3e-3, 0.4e-3, 1.1e-3, 2.5e-3])
 def test_derivatives_match_finite_differences(x):
     t = 3.1e-4
-    h, hx, hxx, ht, htt, hxt = surface_at(x, *strokes(t), CENTERS, WIDTHS)
+    h, hx, hxx, ht, htt, hxt = surface_at(x, *strokes(t), CENTERS, WIDTHS, math.inf)
     dx, dt = 1e-7, 1e-8
     assert h == pytest.approx(height(x, t), rel=1e-15)
     assert hx == pytest.approx((height(x + dx, t) - height(x - dx, t)) / (2 * dx), rel=1e-6)

@@ -2,7 +2,8 @@
 
 h(x, t) = Σ_k s_k(t) g_k(x),  g_k(x) = exp(−(x − c_k)² / (2 w_k²))  (docs/dynamics.md §1).
 Material points move vertically only, so every derivative follows from the strokes (s, ṡ, s̈) and
-g, g', g'' in closed form; nothing is differentiated numerically.
+g, g', g'' in closed form; nothing is differentiated numerically. A bump is skipped where it is below
+``surface.cutoff`` of its peak (error bound: docs/dynamics.md, "Far actuators").
 """
 
 from __future__ import annotations
@@ -26,12 +27,19 @@ class SurfaceParams(ParameterGroup):
                            min_length=1, ge=-1.0, le=1.0)
     widths: tuple = param((1e-3,), 'Gaussian profile widths w_k (standard deviation of the bump)', 'm',
                           min_length=1, ge=1e-7, le=1.0)
+    cutoff: float = param(1e-12, 'relative cutoff: an actuator is skipped where its bump is below this '
+                          'fraction of its peak (0: exact full sum)', ge=0.0, le=1e-3)
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if len(self.widths) != len(self.centers):
             raise ParameterError('surface.widths', list(self.widths),
                                  f'one width per actuator ({len(self.centers)} surface.centers)')
+
+    @property
+    def cutoff_radius(self) -> float:
+        """u_c = sqrt(2 ln(1/cutoff)) in widths: g_k < cutoff beyond |x − c_k| > w_k u_c (inf for 0)."""
+        return math.sqrt(2.0 * math.log(1.0 / self.cutoff)) if self.cutoff > 0.0 else math.inf
 
     @property
     def n_actuators(self) -> int:
@@ -41,15 +49,18 @@ class SurfaceParams(ParameterGroup):
 
 @jit_inline
 def surface_at(x: float, s: np.ndarray, sd: np.ndarray, sdd: np.ndarray, centers: np.ndarray,
-               widths: np.ndarray) -> tuple[float, float, float, float, float, float]:
+               widths: np.ndarray, u_cut: float) -> tuple[float, float, float, float, float, float]:
     """(h, h_x, h_xx, h_t, h_tt, h_xt) at position ``x`` (m) for strokes s (m), ṡ (m/s), s̈ (m/s²).
 
-    Only the first ``centers.size`` entries of the stroke arrays are read.
+    Only the first ``centers.size`` entries of the stroke arrays are read, and only those of actuators
+    with |x − c_k| ≤ w_k·u_cut (``SurfaceParams.cutoff_radius``; ``math.inf`` for the exact full sum).
     """
     h = hx = hxx = ht = htt = hxt = 0.0
     for k in range(centers.size):
         w = widths[k]
         u = (x - centers[k]) / w
+        if abs(u) > u_cut:
+            continue
         g = math.exp(-0.5 * u * u)
         g1 = -u / w * g
         g2 = (u * u - 1.0) / (w * w) * g

@@ -36,7 +36,8 @@ STUCK, SLIDING, FLYING = 0, 1, 2
 (P_MASS, P_GRAVITY, P_PULL_OFF, P_DT, P_EVENT_TOL, P_CONVECTIVE, P_INCLUDE_WEIGHT, P_LANDING_RELATIVE,
  P_THRESHOLD, P_PIEZO, P_PIEZO_OMEGA, P_PIEZO_ZETA, P_PIEZO_MIN, P_PIEZO_MAX, P_HAS_BASE, P_RECORD,
  P_ADAPTIVE, P_TOLERANCE, P_CHECK_STEP, P_DIP_SEARCH) = range(20)
-N_PRM = 20
+P_CUT = 20          # surface.cutoff as a radius u_c in widths (inf: exact full sum; docs/dynamics.md)
+N_PRM = 21
 
 # iv: discrete state. IV_ENTRY_COUNTER: the counter incremented when the current mode was entered (-1
 # none), IV_PREV_MODE: the mode before it; both serve "a mode that ends within the event tolerance of
@@ -116,13 +117,20 @@ def attraction(gap_m: np.ndarray, attraction_n: np.ndarray, gap: float) -> float
 
 @jit_inline
 def strokes_at(t: float, y: np.ndarray, model: tuple, src: tuple, cur: np.ndarray,
-               st: np.ndarray) -> float:
+               st: np.ndarray, every: bool) -> float:
     """Fill ``st`` (3, channels) with s, ṡ, s̈ at ``t`` on the segments ``cur``; return the base
     acceleration (m/s², 0 without the test-only base channel). With the piezo model the actuators'
-    s, ṡ come from the state and s̈ from the stack dynamics driven by the commanded stroke."""
+    s, ṡ come from the state and s̈ from the stack dynamics driven by the commanded stroke.
+
+    Unless ``every`` (or with the piezo model, whose every stack is integrated), an actuator that
+    ``surface_at`` skips at x = y[0] (beyond ``prm[P_CUT]`` widths) reads 0 instead of its stroke."""
     prm = model[0]
     n_act = model[8]
+    skip = not every and prm[P_PIEZO] == 0.0
     for k in range(st.shape[1]):
+        if skip and k < n_act and abs((y[0] - model[1][k]) / model[2][k]) > prm[P_CUT]:
+            st[0, k] = st[1, k] = st[2, k] = 0.0
+            continue
         s, sd, sdd = channel_value(src, k, cur[k, 0], cur[k, 1], t)
         st[0, k] = s
         st[1, k] = sd
@@ -148,7 +156,7 @@ def contact_load(x: float, xd: float, st: np.ndarray, base_acc: float, model: tu
     """
     prm, centers, widths, load_n, q_max_n = model[0], model[1], model[2], model[3], model[4]
     m = prm[P_MASS]
-    h, hx, hxx, ht, htt, hxt = surface_at(x, st[0], st[1], st[2], centers, widths)
+    h, hx, hxx, ht, htt, hxt = surface_at(x, st[0], st[1], st[2], centers, widths, prm[P_CUT])
     length = math.sqrt(1.0 + hx * hx)
     normal_acc = htt + prm[P_GRAVITY] - hx * base_acc
     if prm[P_CONVECTIVE] != 0.0:
@@ -170,12 +178,12 @@ def closest_point(x: float, z: float, st: np.ndarray, model: tuple, aux: np.ndar
     centers, widths = model[1], model[2]
     xs = x
     for _ in range(20):
-        h, hx, hxx, _ht, _htt, _hxt = surface_at(xs, st[0], st[1], st[2], centers, widths)
+        h, hx, hxx, _ht, _htt, _hxt = surface_at(xs, st[0], st[1], st[2], centers, widths, model[0][P_CUT])
         step = ((xs - x) + (h - z) * hx) / (1.0 + hx * hx + (h - z) * hxx)
         xs -= step
         if abs(step) <= 1e-15 + 1e-13 * abs(xs):
             break
-    h, hx, _hxx, _ht, _htt, _hxt = surface_at(xs, st[0], st[1], st[2], centers, widths)
+    h, hx, _hxx, _ht, _htt, _hxt = surface_at(xs, st[0], st[1], st[2], centers, widths, model[0][P_CUT])
     length = math.sqrt(1.0 + hx * hx)
     aux[AUX_XS] = xs
     aux[AUX_H] = h
@@ -190,7 +198,7 @@ def evaluate(mode: int, direction: int, t: float, y: np.ndarray, model: tuple, s
     """Right-hand side ``dy`` of mode ``mode`` at (t, y), and the mode's two margins."""
     prm = model[0]
     m = prm[P_MASS]
-    base_acc = strokes_at(t, y, model, src, cur, st)
+    base_acc = strokes_at(t, y, model, src, cur, st, mode == FLYING)
     for i in range(dy.size):
         dy[i] = 0.0
     if prm[P_PIEZO] != 0.0:
@@ -546,9 +554,10 @@ def transition(which: int, t: float, y: np.ndarray, model: tuple, src: tuple, cu
     the event kind. ``y`` is rewritten for the new mode."""
     prm = model[0]
     mode = iv[IV_MODE]
-    base_acc = strokes_at(t, y, model, src, cur, st)
+    base_acc = strokes_at(t, y, model, src, cur, st, False)
     if mode == FLYING:                                     # landing: keep the tangential velocity
-        _h, hx, _hxx, ht, _htt, _hxt = surface_at(y[0], st[0], st[1], st[2], model[1], model[2])
+        _h, hx, _hxx, ht, _htt, _hxt = surface_at(y[0], st[0], st[1], st[2], model[1], model[2],
+                                                  model[0][P_CUT])
         surface_vz = ht if prm[P_LANDING_RELATIVE] != 0.0 else 0.0
         xd = (y[1] + hx * (y[3] - surface_vz)) / (1.0 + hx * hx)
         y[1] = xd
@@ -559,7 +568,8 @@ def transition(which: int, t: float, y: np.ndarray, model: tuple, src: tuple, cu
         enter(iv, fs, t, SLIDING if xd != 0.0 else STUCK, IV_LANDING, grazing)
         return LANDING
     if which == 1:                                         # take-off with the contact velocity
-        h, hx, _hxx, ht, _htt, _hxt = surface_at(y[0], st[0], st[1], st[2], model[1], model[2])
+        h, hx, _hxx, ht, _htt, _hxt = surface_at(y[0], st[0], st[1], st[2], model[1], model[2],
+                                                  model[0][P_CUT])
         y[2] = h
         y[3] = ht + hx * y[1]
         iv[IV_FRESH] = 1
@@ -590,7 +600,7 @@ def threshold_decision(t: float, y: np.ndarray, model: tuple, src: tuple, cur: n
     change, or -1.
     """
     prm = model[0]
-    base_acc = strokes_at(t, y, model, src, cur, st)
+    base_acc = strokes_at(t, y, model, src, cur, st, False)
     contact_load(y[0], y[1], st, base_acc, model, aux)
     v_rel = y[1] * aux[AUX_L]
     v_threshold = aux[AUX_QMAX] * prm[P_DT] / prm[P_MASS]
@@ -624,10 +634,12 @@ def observe(t: float, y: np.ndarray, iv: np.ndarray, model: tuple, src: tuple, c
     row[C_XD] = y[1]
     row[C_THETA] = math.atan(aux[AUX_HX])
     row[C_N] = aux[AUX_N]
+    strokes_at(t, y, model, src, cur, st, True)            # every stroke column exact, felt or not
     for k in range(model[8]):
         row[N_FIXED_COLUMNS + k] = st[0, k]
     if mode == FLYING:
-        h, _hx, _hxx, ht, _htt, _hxt = surface_at(y[0], st[0], st[1], st[2], model[1], model[2])
+        h, _hx, _hxx, ht, _htt, _hxt = surface_at(y[0], st[0], st[1], st[2], model[1], model[2],
+                                                  model[0][P_CUT])
         row[C_Z] = y[2]
         row[C_ZD] = y[3]
         row[C_FRICTION] = 0.0

@@ -222,6 +222,7 @@ class FeederModel:
         prm[k.P_TOLERANCE] = self.integration.tolerance
         prm[k.P_CHECK_STEP] = self.integration.check_step
         prm[k.P_DIP_SEARCH] = self.integration.event_search == 'dips'
+        prm[k.P_CUT] = self.surface.cutoff_radius
         packed = (prm, np.asarray(self.surface.centers, dtype=float),
                   np.asarray(self.surface.widths, dtype=float),
                   *(np.ascontiguousarray(getattr(tables, name), dtype=float)

@@ -1,0 +1,55 @@
+"""Benchmark: offline cost of actuators the part does not feel (issue 10, item 2).
+
+Usage: .venv/bin/python bench/bench_cutoff.py
+
+Offline speed (x real time, CPU time of this process, best of 3) of a travelling wave
+(config/travelling_wave.yaml widened: actuators 0.5 mm apart, 0.4 mm wide, phases 0.2 of a period apart,
+150 um at 1 kHz, 1000 strokes back to back, 1 s of sim time) with the part in the middle of the row:
+1 actuator, 16 and 64 actuators with surface.cutoff 1e-12 (the default), and 64 with cutoff 0 (the
+exact full sum). Target (issue 10): 64 actuators within 2x of 1 actuator. The part does not move alike
+in all of them: with 1 actuator it sticks after one slide (cheap steps), with 16 or 64 it slides all the
+time, reversing twice a stroke, and feels the ~12 actuators within u_c = 7.4 widths; 16 -> 64 shows
+what the actuators it does not feel cost.
+"""
+
+import time
+
+from micro_feeder.physics.dynamics import FeederModel
+
+TARGET_RATIO, SIM_TIME = 2.0, 1.0
+
+
+def travelling_wave(n: int, cutoff: float) -> FeederModel:
+    """n actuators 0.5 mm apart centred on the part at x0 = 0.1 mm."""
+    return FeederModel.from_settings({
+        'particle.x0': 0.1e-3, 'surface.centers': [0.5e-3 * (k - n // 2) for k in range(n)],
+        'surface.widths': [0.4e-3] * n, 'stroke.amplitude': 150e-6, 'stroke.frequency': 1000.0,
+        'stroke.phases': [(0.2 * k) % 1.0 for k in range(n)], 'stroke.count': 1000,
+        'surface.cutoff': cutoff})
+
+
+def speed(n: int, cutoff: float) -> float:
+    """Best of 3 speed-ups over real time (after a first millisecond that compiles and warms up)."""
+    model = travelling_wave(n, cutoff)
+    best = 0.0
+    for _ in range(3):
+        state = model.initial_state()
+        model.advance(state, 1e-3)
+        start = time.process_time()
+        model.advance(state, SIM_TIME)
+        best = max(best, (SIM_TIME - 1e-3) / (time.process_time() - start))
+    print(f'travelling wave, {n:2d} actuators, cutoff {cutoff:g}: {best:6.1f}x real time '
+          f'(part moved {state.distance * 1e3:+.3f} mm, {sum(state.transitions.values())} transitions)')
+    return best
+
+
+def main() -> None:
+    one, sixteen, many, full = (
+        speed(n, cutoff) for n, cutoff in ((1, 1e-12), (16, 1e-12), (64, 1e-12), (64, 0.0)))
+    ratio = one / many
+    print(f'64 actuators vs 1, cutoff 1e-12: {ratio:.0f}x slower ({one / full:.0f}x with cutoff 0); target within '
+          f'{TARGET_RATIO:.0f}x: {"met" if ratio <= TARGET_RATIO else "NOT met"} (1 actuator: the part sticks)')
+    print(f'64 actuators vs 16 (alike motion): {sixteen / many:.2f}x slower ({sixteen / full:.1f}x with cutoff 0)')
+
+if __name__ == '__main__':
+    main()
