@@ -54,7 +54,7 @@ from ..realtime.intake import CommandIntake, IntakeCounters, Outcome, Received, 
 from ..realtime.loop import GIL_SWITCH_INTERVAL, TickLoop
 from . import messages
 from ._ros import SERVICE_QOS, status_name, topic_qos
-from .commands import joint_names, parse_setpoints, parse_trajectory_cdr, start_time
+from .commands import joint_names, parse_setpoints, parse_trajectory, parse_trajectory_cdr, start_time
 from .parameters import check_changes, declare, model_specs, values
 from .spin import spin_node
 from .stepper import Stepper, build_model
@@ -87,6 +87,10 @@ BUSY_TIMEOUT = 0.5     # s a service waits for a tick in progress before answeri
 STOP_TIMEOUT = 0.3     # s destroy_node waits for each of the loop and intake threads (Ctrl-C answered < 1 s)
 COMMAND_QUEUE = 1000   # commands the subscription holds while the executor is busy (a flood waits, not lost)
 COMMAND_TYPES = {'actuator/trajectory': JointTrajectory, 'actuator/command': Float64MultiArray}
+
+# A trajectory larger than this (a window of ~100 knots) is read from its bytes with numpy; smaller ones are
+# deserialized by rclpy, cheaper for a few knots (a command storm of small trajectories)
+CDR_PARSE_BYTES = 8192
 
 
 class Busy(Exception):
@@ -358,13 +362,15 @@ class Simulator(Node):
     def _parse(self, received: Received) -> tuple[str, Any]:
         """A checked command for the current model, or ValueError with the reason (no lock needed)."""
         stepper = self._stepper
-        if received.topic == 'actuator/trajectory':     # knots read from the bytes with numpy
-            joints = joint_names(stepper.model.n_actuators)
+        joints = joint_names(stepper.model.n_actuators)
+        if received.topic == 'actuator/trajectory' and len(received.data) > CDR_PARSE_BYTES:
             return received.topic, parse_trajectory_cdr(received.data, joints, stepper.limits)
         try:
             msg = deserialize_message(received.data, COMMAND_TYPES[received.topic])
         except Exception as err:  # rclpy raises several types for malformed bytes
             raise ValueError(f'{received.topic}: cannot deserialize: {err}') from err
+        if received.topic == 'actuator/trajectory':
+            return received.topic, parse_trajectory(msg, joints, stepper.limits)
         return received.topic, parse_setpoints(msg.data, stepper.model.n_actuators, stepper.limits)
 
     def _plan(self, batch: list[Received]) -> list[Outcome]:
@@ -376,14 +382,20 @@ class Simulator(Node):
         between two ticks; in lockstep each command grants its step."""
         generation = self._generation
         outcomes = self._plan(batch)
+        receipts: list[tuple[str, float]] = []    # published after the lock: a tick waits for it
         with self._lock:
             if generation != self._generation:      # a reset changed the model while parsing
                 outcomes = self._plan(batch)
             for outcome in outcomes:
-                self._acknowledge(outcome.received.topic)
+                if self._lockstep:
+                    self._acknowledge(outcome.received.topic, self._stepper.t)
+                else:
+                    receipts.append((outcome.received.topic, self._stepper.t))
                 self._apply(outcome)
                 if self._lockstep:
                     self._grant_step()
+        for topic, t in receipts:
+            self._acknowledge(topic, t)
         self.commands.dropped = self._intake.dropped if self._intake is not None else 0
 
     def _apply(self, outcome: Outcome) -> None:
@@ -417,9 +429,9 @@ class Simulator(Node):
                 f'{self._stepper.t:.6f} s were dropped (the sender should schedule further ahead, e.g. the '
                 "actuator's stream.lead)"))
 
-    def _acknowledge(self, topic: str) -> None:
-        """``~/command_receipts``: a command arrived on ``topic`` at the current sim time."""
-        self._pub_receipts.publish(Header(stamp=messages.to_time(self._stepper.t), frame_id=topic))
+    def _acknowledge(self, topic: str, t: float) -> None:
+        """``~/command_receipts``: a command arrived on ``topic`` and was applied at sim time ``t`` (s)."""
+        self._pub_receipts.publish(Header(stamp=messages.to_time(t), frame_id=topic))
 
     def _refuse(self, reason: str) -> None:
         self.commands.refused += 1

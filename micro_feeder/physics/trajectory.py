@@ -207,22 +207,27 @@ def _polynomial_extrema(coef: np.ndarray, length: np.ndarray) -> tuple[np.ndarra
     return stacked.min(axis=0), stacked.max(axis=0)
 
 
+# Power basis on u ∈ [0, 1] -> Bernstein basis of degree N_POLY - 1: b_j = Σ_{i≤j} C(j, i)/C(n, i) a_i.
+_POWER_TO_BERNSTEIN = np.array([[math.comb(j, i) / math.comb(N_POLY - 1, i) if i <= j else 0.0
+                                 for j in range(N_POLY)] for i in range(N_POLY)])
+
+
 def table_range(table: StrokeTable, within: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(min, max) per channel of the stroke of a Hermite trajectory table (no trigonometric terms) over
     all time: its segments' extrema and the held values before and after.
 
-    With ``within`` = (low, high), a segment whose cheap bound c_0 ± Σ_{i≥1} |c_i ℓ^i| (ℓ its length)
-    lies inside [low, high] contributes that bound instead of its exact extrema: the result is then exact
-    only where it leaves [low, high], which is all a limit check needs (and skips the companion-matrix
-    eigenvalues of almost every segment of a stroke well inside the travel).
+    With ``within`` = (low, high), a segment whose Bernstein bound (the polynomial on u = τ/ℓ ∈ [0, 1] lies
+    within the range of its Bernstein coefficients; ℓ its length) lies inside [low, high] contributes that
+    bound instead of its exact extrema: the result is then exact only where it leaves [low, high], which is
+    all a limit check needs (and skips the companion-matrix eigenvalues of almost every segment of a
+    stroke well inside the travel).
     """
     coef = table.seg_coef[:, :, :N_POLY]
     n_act, n_seg = coef.shape[:2]
     length = np.diff(table.seg_start, axis=1)[:, :n_seg].reshape(-1)
     coef = coef.reshape(-1, N_POLY)
-    scaled = coef * length[:, None] ** np.arange(N_POLY)
-    spread = np.sum(np.abs(scaled[:, 1:]), axis=1)
-    low, high = scaled[:, 0] - spread, scaled[:, 0] + spread
+    bernstein = (coef * length[:, None] ** np.arange(N_POLY)) @ _POWER_TO_BERNSTEIN
+    low, high = bernstein.min(axis=1), bernstein.max(axis=1)
     exact = np.ones(low.size, dtype=bool) if within is None else (low < within[0]) | (high > within[1])
     if exact.any():
         low[exact], high[exact] = _polynomial_extrema(coef[exact], length[exact])
