@@ -1,7 +1,8 @@
 """Command storms against the real ``simulator`` executable (issue: storms must not sink the loop): 5 s of
 5 kHz valid trajectories, 5 s of 5 kHz NaN set-points, one 1,000,000-point trajectory. The simulator must
 keep publishing (target >= 950 states per wall second, asserted >= 85 % of its rate without
-commands) with at most 50 log lines, count every refusal and acknowledge every command. Figures are printed (``pytest -s``) with the load average.
+commands) with at most 50 log lines, count every refusal and acknowledge every command. Figures are
+printed (``pytest -s``) with the load average.
 
 The rates are judged only on a machine that can hold 1 kHz at all: at least 990 states/s without commands
 (measured just before the storms) and a load average not above the number of cores. On a machine shared
