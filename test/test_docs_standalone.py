@@ -8,7 +8,7 @@ import subprocess
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
-OUTSIDE = re.compile(r'DYNAMICS\.md|CONTACT_MODEL\.md|DESIGN\.md|ROS_STACK\.md|\.\./shared')
+OUTSIDE = re.compile(r'DYNAMICS(\.md|\b)|CONTACT_MODEL|DESIGN(\.md| §)|ROS_STACK|\.\./shared')
 
 
 def tracked_text_files() -> list[Path]:

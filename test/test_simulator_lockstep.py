@@ -215,7 +215,7 @@ def _poll(predicate: Callable[[], bool], what: str) -> None:
 
 def test_executor_on_another_thread_while_the_loop_runs(ros_context: Context) -> None:
     """Commands, services and parameter sets from other threads while the loop ticks; no deadlock on the
-    way out (the ROS_STACK hazard was an executor spun off the main thread). Not with rclpy's
+    way out (the known hazard is an EventsExecutor spun off the main thread). Not with rclpy's
     MultiThreadedExecutor, which starves the loop thread in-process (docs/interface.md, loop limitation)."""
     rig = Rig(ros_context)
     sim, probe = rig.sim, rig.probe

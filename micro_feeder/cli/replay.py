@@ -63,7 +63,7 @@ def _check(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     _check(args)
-    # DESIGN §2: ROS traffic stays on this host unless the user sets the range (rcl reads it at init).
+    # ROS traffic stays on this host unless the user sets the range (rcl reads it at init).
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     from ..nodes.replay import main as replay_main  # rclpy only when replaying, after the environment
 
