@@ -41,8 +41,9 @@ def test_ke_literature_reference_numbers(literature):
     assert n['mu_weight'] == pytest.approx(7834, rel=1e-3)
     assert n['d_pull_off_m'] == pytest.approx(59.158e-9, rel=1e-3)
     # F_po here is the difference of two nearly equal totals (P = 3.54e-4 N, F_s = 3.96e-4 N), so it
-    # amplifies ~10x the reference's own ~1e-4 precision: ours is 1.02e-3 below the §12 value while our
-    # contacting adhesion matches an independent adaptive quadrature to 1e-7 (test_contact_asperity).
+    # amplifies ~10x the reference's own ~1e-4 precision: ours is 1.02e-3 below the reference value
+    # (docs/contact.md §5) while our contacting adhesion matches an independent adaptive quadrature to 1e-7
+    # (test_contact_asperity).
     assert n['pull_off_n'] == pytest.approx(4.16574e-5, rel=1.5e-3)
 
 

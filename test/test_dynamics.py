@@ -54,7 +54,7 @@ def constant_base_acceleration(a0: float, duration: float):
 
 
 def test_sliding_starts_when_m_a_reaches_q_max(model):
-    """§7.1: base acceleration ramp a = J t; sliding starts exactly at m a = Q_max(W) = 40 m/s² · m."""
+    """base acceleration ramp a = J t; sliding starts exactly at m a = Q_max(W) = 40 m/s² · m."""
     jerk, t_end = 4e4, 2e-3
     ramp = trajectory_table([0.0, t_end], [[0.0], [jerk * t_end ** 3 / 6]], [[0.0], [jerk * t_end ** 2 / 2]],
                             [[0.0], [jerk * t_end]])
@@ -71,7 +71,7 @@ def test_sliding_starts_when_m_a_reaches_q_max(model):
 
 
 def test_coulomb_displacement_matches_closed_form(model):
-    """§7.1: constant a0 for τ, then 0: x = −(a0−μ)τ²/2 − ((a0−μ)τ)²/(2μ), μ = Q_max(W)/m."""
+    """constant a0 for τ, then 0: x = −(a0−μ)τ²/2 − ((a0−μ)τ)²/(2μ), μ = Q_max(W)/m."""
     a0, tau = 100.0, 1e-3
     m = flat(model, constant_base_acceleration(a0, tau))
     mu = table_mu(m)
@@ -85,7 +85,7 @@ def test_coulomb_displacement_matches_closed_form(model):
 
 
 def test_no_tangential_motion_at_the_bump_centre(model):
-    """§7.2: h_x = 0 under the part: it never slides (strokes up to just below take-off)."""
+    """h_x = 0 under the part: it never slides (strokes up to just below take-off)."""
     for amplitude in (100e-6, 200e-6):
         m = model.replace(stroke=model.stroke.replace(amplitude=amplitude),
                           particle=model.particle.replace(x0=0.0), contact_model=model.contact_model)
@@ -96,7 +96,7 @@ def test_no_tangential_motion_at_the_bump_centre(model):
 
 @pytest.mark.parametrize('frequency', [1000.0, 1500.0])
 def test_mirror_symmetry(model, frequency):
-    """§7.2: parts at c + Δ and c − Δ move mirror-symmetrically (bump centred at c = 1 mm)."""
+    """parts at c + Δ and c − Δ move mirror-symmetrically (bump centred at c = 1 mm)."""
     base = model.replace(surface=model.surface.replace(centers=(1e-3,)),
                          stroke=model.stroke.replace(frequency=frequency, amplitude=150e-6))
     right = base.run(state=base.initial_state(1e-3 + 0.4e-3)).state
@@ -113,7 +113,7 @@ def distance(m: FeederModel) -> float:
 
 
 def test_rk4_converges_with_fourth_order(model):
-    """§7.3: distance per stroke vs dt for fixed-step RK4 (events located to 1e-9 s): order 4 until the
+    """distance per stroke vs dt for fixed-step RK4 (events located to 1e-9 s): order 4 until the
     kinks of the piecewise-linear Q_max(N) table take over (below dt ~ 5e-5 s, docs/dynamics.md)."""
     reference = distance(model.replace(integration=model.integration.replace(method='rk4', dt=1e-6)))
     errors = [abs(distance(model.replace(integration=model.integration.replace(method='rk4', dt=dt)))
@@ -124,14 +124,14 @@ def test_rk4_converges_with_fourth_order(model):
 
 @pytest.mark.parametrize('frequency', [1000.0, 3000.0])   # stick-slide-stick; and a take-off
 def test_default_step_meets_the_accuracy_target(model, frequency):
-    """§5: the default (adaptive) integration keeps distance per stroke within 0.1 % of dt -> 0."""
+    """the default (adaptive) integration keeps distance per stroke within 0.1 % of dt -> 0."""
     m = model.replace(stroke=model.stroke.replace(frequency=frequency))
     fine = m.replace(integration=m.integration.replace(dt=1e-6, tolerance=1e-14))
     assert distance(m) == pytest.approx(distance(fine), rel=1e-3)
 
 
 def test_threshold_logic_converges_to_event_location(model):
-    """§7.3: the seed's threshold-velocity logic approaches the event-located result as dt -> 0."""
+    """the seed's threshold-velocity logic approaches the event-located result as dt -> 0."""
     exact = distance(model.replace(integration=model.integration.replace(tolerance=1e-14, dt=1e-5)))
     gaps = [abs(distance(model.replace(integration=model.integration.replace(
         friction_logic='threshold', dt=dt))) / exact - 1) for dt in (1e-5, 2.5e-7)]
@@ -140,7 +140,7 @@ def test_threshold_logic_converges_to_event_location(model):
 
 
 def test_energy_balance_frictionless(model):
-    """§7.4: frictionless, adhesion-free: ΔE = ∫ N h_t / L dt, the work of the moving surface."""
+    """frictionless, adhesion-free: ΔE = ∫ N h_t / L dt, the work of the moving surface."""
     m = model.replace(stroke=model.stroke.replace(frequency=50.0), contact_model=FrictionlessContact(),
                       integration=model.integration.replace(method='rk4', dt=2e-6))
     result = m.run(duration=0.03)
@@ -155,7 +155,7 @@ def test_energy_balance_frictionless(model):
 
 
 def test_free_flight_is_a_parabola(model):
-    """§7.5: no attraction, flat surface: x = x0 + vx t, z = z0 + vz t − g t²/2 to 1e-9 m."""
+    """no attraction, flat surface: x = x0 + vx t, z = z0 + vz t − g t²/2 to 1e-9 m."""
     m = flat(model).replace(contact_model=FrictionlessContact())
     state = m.flying_state(x=1e-3, z=1e-3, vx=0.01, vz=0.1)
     assert m.advance(state, 0.02) == []
