@@ -161,7 +161,7 @@ def test_free_flight_is_a_parabola(model):
     assert m.advance(state, 0.02) == []
     g = m.particle.gravity
     assert state.x == pytest.approx(1e-3 + 0.01 * 0.02, abs=1e-9)
-    assert state.y[2] == pytest.approx(1e-3 + 0.1 * 0.02 - g * 0.02 ** 2 / 2, abs=1e-9)
+    assert state.z == pytest.approx(1e-3 + 0.1 * 0.02 - g * 0.02 ** 2 / 2, abs=1e-9)
     assert state.mode == 'flying'
 
 

@@ -37,8 +37,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _tolerance(given: float | None, log: Any, overrides: dict[str, Any]) -> tuple[float, str]:
     """The difference (m) below which the verdict says the runs match, and where it comes from: ``--tolerance``,
     else the run's ``integration.tolerance``. Why that one: the integrator is allowed that position error per
-    step, and a real-time log knows its stop times to 1 ns only, so the re-simulation takes other steps than
-    the simulator did; differences below the error each step may make are numerical noise, not physics."""
+    step, and a real-time log knows its stop and command times to 1 ns only, so the re-simulation evaluates
+    poses and starts a command up to 1 ns off; differences below the error each step may make are numerical
+    noise, not physics."""
     if given is not None:
         return given, '--tolerance'
     from ..logs.sim_parameters import recorded_parameters

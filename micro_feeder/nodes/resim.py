@@ -20,8 +20,9 @@ What it reads from the log (all recorded by default, see docs/logs.md):
   at every published pose; the stamps are rounded to 1 ns, so the exact stop times are rebuilt as
   the simulator computed them, ``t + step_period`` per step (stepped mode, or ``real_time_factor`` 0),
   checked against every stamp. In real time the increments are elapsed wall time × factor, which the
-  log only knows to the nanosecond: the re-simulation stops at the rounded times, and the adaptive
-  integrator's steps differ by that much, so a small difference remains (reported, with why).
+  log only knows to the nanosecond: the re-simulation stops at the rounded times; between commands the
+  integrator takes the same steps (a stop never cuts a step) but a pose is evaluated up to 1 ns off on a
+  moving surface, so a small difference remains (reported, with why).
 
 Only the run up to the first ``simulator/reset`` is compared (a note says so when the log has more).
 Lives in ``nodes`` (not ``logs``) because it drives the simulator's Stepper and the node's command
@@ -43,6 +44,7 @@ from ..physics.dynamics import SimulationError
 from .commands import CommandRejected, joint_names, parse_setpoints, parse_trajectory
 from .parameters import model_specs
 from .stepper import Stepper, build_model
+from .transitions import TRANSITION_KINDS
 
 COMMAND_TOPICS = ('actuator/trajectory', 'actuator/command')
 MAX_INTERMEDIATE_STEPS = 1_000_000  # unrecorded steps rebuilt between two recorded poses, at most
@@ -77,6 +79,8 @@ class ResimReport:
     exact_stop_times: bool
     receipts: str              # 'recorded' or 'estimated'
     notes: list[str] = field(default_factory=list)
+    transitions: dict[str, int] = field(default_factory=dict)   # re-simulated, up to the last compared pose
+    recorded_transitions: dict[str, int] | None = None          # particle/transitions up to then (None: not logged)
 
     @property
     def identical(self) -> bool:
@@ -91,6 +95,10 @@ class ResimReport:
         what = (f'{self.poses} poses, {self.sim_time:.6f} s sim time, {total} command{"s" * (total != 1)}'
                 + (f' ({self.commands_rejected} refused, as by the simulator)' if self.commands_rejected else '')
                 + f'; {self.mode} run' + (f', changed: {", ".join(sorted(self.overrides))}' if self.overrides else ''))
+        if self.recorded_transitions is not None:
+            same = self.recorded_transitions == self.transitions
+            what += '; transitions ' + ('as recorded' if same else f'DIFFER: re-simulated {self.transitions}, '
+                                                                   f'recorded {self.recorded_transitions}')
         if self.identical:
             return f'resim: IDENTICAL: re-simulated bit for bit ({what})'
         where = f' at t = {self.t_max_error:.6f} s' if self.t_max_error is not None else ''
@@ -277,8 +285,10 @@ def resimulate(log: LogReader, overrides: Mapping[str, Any] | None = None, *,
     real_time_note = None if exact else (
         'real-time run: the simulator stopped at sums of elapsed wall times x real_time_factor, '
         'which the stamps give rounded to 1 ns, so the re-simulation stops within 1 ns of them, not '
-        'bit for bit; its integrator steps differ by that much, and a difference at the 1e-14 m level '
-        '(4e-14 m measured over a 20-slip run) comes from this, not from the commands or the model')
+        'bit for bit; between commands it takes the same integration steps (a stop does not cut a step), but '
+        'each pose is evaluated up to 1 ns off on a moving surface, and a difference at the 1e-14 m level '
+        '(4.8e-14 m in z, x identical, measured over a 20-slip run) comes from this, not from the commands or '
+        'the model')
     commands, receipts = _commands(log, pose_log, notes)
     if poses[0][0] != 0:
         notes.append(f'the first recorded pose is at t = {poses[0][0] * 1e-9:.6f} s, not 0 (the recorder joined '
@@ -288,9 +298,25 @@ def resimulate(log: LogReader, overrides: Mapping[str, Any] | None = None, *,
     report = ResimReport(str(log.path), run_mode(first), source, overrides, 0, 0.0, 0.0, 0.0, 0.0, None, 0, 0,
                          exact, receipts, notes)
     _run(stepper, stops, sorted(commands, key=lambda c: c.receipt_ns), report, progress)  # stable: receipt order
+    report.transitions = stepper.state.transitions
+    report.recorded_transitions = _recorded_transitions(log, round(report.sim_time * 1e9))
     if real_time_note is not None and report.max_error != 0.0:  # explains a difference; none when there is none
         notes.append(real_time_note)
     return report
+
+
+def _recorded_transitions(log: LogReader, until_ns: int) -> dict[str, int] | None:
+    """Mode changes on ``particle/transitions`` stamped up to ``until_ns`` (sim time), counted by kind as
+    the simulator's counters count them; None when the log does not have the topic."""
+    if log.resolve('particle/transitions') is None:
+        return None
+    counts = dict.fromkeys(TRANSITION_KINDS, 0)
+    for m in log.messages(['particle/transitions'], decoded=True):
+        if m.stamp_ns is not None and m.stamp_ns <= until_ns:
+            for status in m.message.status:
+                if status.message in counts:
+                    counts[status.message] += 1
+    return counts
 
 
 def _run(stepper: Stepper, stops: list[_Stop], commands: list[_Command], report: ResimReport,

@@ -6,10 +6,9 @@ module is its engine. Equations: docs/dynamics.md §1; event location: docs/even
 
 Data passed around (all SI):
 
-* ``model``: tuple ``(prm, centers, widths, load_n, q_max_n, separation_m, gap_m, attraction_n, n_act)``
-  with ``prm`` the scalar parameter vector indexed by the ``P_*`` constants below;
+* ``model``: a :class:`KernelModel`, the immutable inputs by name (MuJoCo's ``mjModel``);
 * ``src``: a :class:`~micro_feeder.physics.waveforms.StrokeTable` as a tuple; channels 0..n_act-1 are
-  the actuators, channel n_act (present when ``prm[P_HAS_BASE]``) the horizontal base acceleration of
+  the actuators, channel n_act (present when ``model.has_base``) the horizontal base acceleration of
   the test-only flat-surface check (its s̈ is the base acceleration);
 * ``y``: state vector. In contact ``[x, ẋ, 0, 0]``, in flight ``[x, v_x, z, v_z]``; then, with the piezo
   model, ``[s_k, ṡ_k]`` per actuator;
@@ -22,6 +21,7 @@ stuck: Q_max − |T_req| and N_det + F_po; sliding: dir·ẋ and N_det + F_po; f
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -32,24 +32,57 @@ from ..waveforms import COEF_OMEGA, channel_value, locate_segment, segment_end
 
 STUCK, SLIDING, FLYING = 0, 1, 2
 
-# prm: scalar parameters
-(P_MASS, P_GRAVITY, P_PULL_OFF, P_DT, P_EVENT_TOL, P_CONVECTIVE, P_INCLUDE_WEIGHT, P_LANDING_RELATIVE,
- P_THRESHOLD, P_PIEZO, P_PIEZO_OMEGA, P_PIEZO_ZETA, P_PIEZO_MIN, P_PIEZO_MAX, P_HAS_BASE, P_RECORD,
- P_ADAPTIVE, P_TOLERANCE, P_CHECK_STEP, P_DIP_SEARCH) = range(20)
-P_CUT = 20          # surface.cutoff as a radius u_c in widths (inf: exact full sum; docs/dynamics.md)
-N_PRM = 21
+
+class KernelModel(NamedTuple):
+    """Everything the kernel reads and never changes, by name (SI units): built by
+    :class:`~micro_feeder.physics.dynamics.model.FeederModel`. numba compiles it as a typed tuple."""
+
+    mass: float                 # particle mass (kg)
+    gravity: float              # g (m/s²)
+    pull_off: float             # pull-off force F_po (N)
+    dt: float                   # RK4 step / largest DOPRI5 step (s)
+    tolerance: float            # DOPRI5 error allowed per step on positions (m)
+    check_step: float           # largest step while stuck (s)
+    event_tolerance: float      # time tolerance of event location (s)
+    cutoff_radius: float        # surface.cutoff as a radius in widths (inf: exact sum; docs/dynamics.md)
+    piezo_omega: float          # piezo stack natural angular frequency (rad/s)
+    piezo_zeta: float           # piezo stack damping ratio
+    piezo_min: float            # piezo travel limits (m)
+    piezo_max: float
+    adaptive: bool              # DOPRI5 (else fixed-step RK4)
+    threshold: bool             # the seed's threshold-velocity friction logic (else exact events)
+    dip_search: bool            # event_search 'dips': margins' minima inside steps are searched
+    convective: bool            # 2 h_xt ẋ + h_xx ẋ² kept in the normal load
+    include_weight: bool        # take-off test with the weight inside N
+    landing_relative: bool      # landing keeps the velocity relative to the surface
+    piezo: bool                 # piezo stack dynamics integrated (state y[4:])
+    has_base: bool              # test-only base-acceleration channel after the actuators
+    record: bool                # write one output row per step and event
+    centers: np.ndarray         # actuator centres (m)
+    widths: np.ndarray          # actuator widths (m)
+    load_n: np.ndarray          # contact tables: normal load (N) ...
+    q_max_n: np.ndarray         # ... and Q_max at that load (N), separation (m) at that load
+    separation_m: np.ndarray
+    gap_m: np.ndarray           # flight table: gap (m) ...
+    attraction_n: np.ndarray    # ... and adhesive attraction (N)
+    n_actuators: int
+
 
 # iv: discrete state. IV_ENTRY_COUNTER: the counter incremented when the current mode was entered (-1
 # none), IV_PREV_MODE: the mode before it; both serve "a mode that ends within the event tolerance of
 # its start is treated as not entered".
+# IV_AHEAD_*: the step taken past the last target (see ``advance``); IV_START_*: what the dip search
+# knows about the margins' slopes where the next step starts.
 (IV_MODE, IV_DIR, IV_FRESH, IV_STICK_TO_SLIP, IV_SLIP_TO_STICK, IV_TAKE_OFF, IV_LANDING,
- IV_ENTRY_COUNTER, IV_PREV_MODE) = range(9)
-N_IV = 9
+ IV_ENTRY_COUNTER, IV_PREV_MODE, IV_AHEAD_WHICH, IV_AHEAD_GRAZING, IV_START_KNOWN, IV_START_DOWN0,
+ IV_START_DOWN1) = range(14)
+N_IV = 14
 COUNTERS = (IV_STICK_TO_SLIP, IV_SLIP_TO_STICK, IV_TAKE_OFF, IV_LANDING)
 
-# fs: continuous bookkeeping (FS_H: the adaptive step size to try next)
-FS_T, FS_T_ENTRY, FS_MAX_SPEED, FS_H = range(4)
-N_FS = 4
+# fs: continuous bookkeeping (FS_H: the adaptive step size to try next; FS_AHEAD_T0/T1: start and end of
+# the step taken past the last target, T1 NaN when there is none)
+FS_T, FS_T_ENTRY, FS_MAX_SPEED, FS_H, FS_AHEAD_T0, FS_AHEAD_T1 = range(6)
+N_FS = 6
 N_SCRATCH = 11
 
 # Dormand-Prince 5(4): nodes, stage coefficients, 5th-order weights, error weights (b - b*).
@@ -116,55 +149,53 @@ def attraction(gap_m: np.ndarray, attraction_n: np.ndarray, gap: float) -> float
 
 
 @jit_inline
-def strokes_at(t: float, y: np.ndarray, model: tuple, src: tuple, cur: np.ndarray,
+def strokes_at(t: float, y: np.ndarray, model: KernelModel, src: tuple, cur: np.ndarray,
                st: np.ndarray, every: bool) -> float:
     """Fill ``st`` (3, channels) with s, ṡ, s̈ at ``t`` on the segments ``cur``; return the base
     acceleration (m/s², 0 without the test-only base channel). With the piezo model the actuators'
     s, ṡ come from the state and s̈ from the stack dynamics driven by the commanded stroke.
 
     Unless ``every`` (or with the piezo model, whose every stack is integrated), an actuator that
-    ``surface_at`` skips at x = y[0] (beyond ``prm[P_CUT]`` widths) reads 0 instead of its stroke."""
-    prm = model[0]
-    n_act = model[8]
-    skip = not every and prm[P_PIEZO] == 0.0
+    ``surface_at`` skips at x = y[0] (beyond ``model.cutoff_radius`` widths) reads 0 instead of its stroke."""
+    n_act = model.n_actuators
+    skip = not every and not model.piezo
     for k in range(st.shape[1]):
-        if skip and k < n_act and abs((y[0] - model[1][k]) / model[2][k]) > prm[P_CUT]:
+        if skip and k < n_act and abs((y[0] - model.centers[k]) / model.widths[k]) > model.cutoff_radius:
             st[0, k] = st[1, k] = st[2, k] = 0.0
             continue
         s, sd, sdd = channel_value(src, k, cur[k, 0], cur[k, 1], t)
         st[0, k] = s
         st[1, k] = sd
         st[2, k] = sdd
-    if prm[P_PIEZO] != 0.0:
+    if model.piezo:
         for k in range(n_act):
             s = y[4 + 2 * k]
             sd = y[5 + 2 * k]
-            st[2, k] = piezo_acceleration(st[0, k], s, sd, prm[P_PIEZO_OMEGA], prm[P_PIEZO_ZETA],
-                                          prm[P_PIEZO_MIN], prm[P_PIEZO_MAX])
+            st[2, k] = piezo_acceleration(st[0, k], s, sd, model.piezo_omega, model.piezo_zeta,
+                                          model.piezo_min, model.piezo_max)
             st[0, k] = s
             st[1, k] = sd
-    return st[2, n_act] if prm[P_HAS_BASE] != 0.0 else 0.0
+    return st[2, n_act] if model.has_base else 0.0
 
 
 @jit_inline
-def contact_load(x: float, xd: float, st: np.ndarray, base_acc: float, model: tuple,
+def contact_load(x: float, xd: float, st: np.ndarray, base_acc: float, model: KernelModel,
                  aux: np.ndarray) -> None:
     """Normal load N, required friction T_req and Q_max(N) for a part on the surface at (x, ẋ).
 
     N = m (h_tt + 2 h_xt ẋ + h_xx ẋ² + g − h_x a_b) / L, T_req = N h_x + m L a_b (a_b: base
     acceleration, 0 except in the flat-surface check), and ẍ = (T − T_req) / (m L).
     """
-    prm, centers, widths, load_n, q_max_n = model[0], model[1], model[2], model[3], model[4]
-    m = prm[P_MASS]
-    h, hx, hxx, ht, htt, hxt = surface_at(x, st[0], st[1], st[2], centers, widths, prm[P_CUT])
+    m = model.mass
+    h, hx, hxx, ht, htt, hxt = surface_at(x, st[0], st[1], st[2], model.centers, model.widths, model.cutoff_radius)
     length = math.sqrt(1.0 + hx * hx)
-    normal_acc = htt + prm[P_GRAVITY] - hx * base_acc
-    if prm[P_CONVECTIVE] != 0.0:
+    normal_acc = htt + model.gravity - hx * base_acc
+    if model.convective:
         normal_acc += 2.0 * hxt * xd + hxx * xd * xd
     n = m * normal_acc / length
     aux[AUX_N] = n
     aux[AUX_T_REQ] = n * hx + m * length * base_acc
-    aux[AUX_QMAX] = interp_near(load_n, q_max_n, n, aux, AUX_LOAD_INDEX)
+    aux[AUX_QMAX] = interp_near(model.load_n, model.q_max_n, n, aux, AUX_LOAD_INDEX)
     aux[AUX_L] = length
     aux[AUX_H] = h
     aux[AUX_HX] = hx
@@ -172,18 +203,18 @@ def contact_load(x: float, xd: float, st: np.ndarray, base_acc: float, model: tu
 
 
 @jit
-def closest_point(x: float, z: float, st: np.ndarray, model: tuple, aux: np.ndarray) -> None:
+def closest_point(x: float, z: float, st: np.ndarray, model: KernelModel, aux: np.ndarray) -> None:
     """Closest surface point to (x, z) by Newton on its abscissa x_s; sets AUX_XS, AUX_H, AUX_HX (at
     x_s), AUX_L and AUX_GAP = signed distance along the normal there (> 0 above the surface)."""
-    centers, widths = model[1], model[2]
+    centers, widths = model.centers, model.widths
     xs = x
     for _ in range(20):
-        h, hx, hxx, _ht, _htt, _hxt = surface_at(xs, st[0], st[1], st[2], centers, widths, model[0][P_CUT])
+        h, hx, hxx, _ht, _htt, _hxt = surface_at(xs, st[0], st[1], st[2], centers, widths, model.cutoff_radius)
         step = ((xs - x) + (h - z) * hx) / (1.0 + hx * hx + (h - z) * hxx)
         xs -= step
         if abs(step) <= 1e-15 + 1e-13 * abs(xs):
             break
-    h, hx, _hxx, _ht, _htt, _hxt = surface_at(xs, st[0], st[1], st[2], centers, widths, model[0][P_CUT])
+    h, hx, _hxx, _ht, _htt, _hxt = surface_at(xs, st[0], st[1], st[2], centers, widths, model.cutoff_radius)
     length = math.sqrt(1.0 + hx * hx)
     aux[AUX_XS] = xs
     aux[AUX_H] = h
@@ -193,39 +224,38 @@ def closest_point(x: float, z: float, st: np.ndarray, model: tuple, aux: np.ndar
 
 
 @jit_inline
-def evaluate(mode: int, direction: int, t: float, y: np.ndarray, model: tuple, src: tuple,
+def evaluate(mode: int, direction: int, t: float, y: np.ndarray, model: KernelModel, src: tuple,
              cur: np.ndarray, st: np.ndarray, aux: np.ndarray, dy: np.ndarray) -> tuple[float, float]:
     """Right-hand side ``dy`` of mode ``mode`` at (t, y), and the mode's two margins."""
-    prm = model[0]
-    m = prm[P_MASS]
+    m = model.mass
     base_acc = strokes_at(t, y, model, src, cur, st, mode == FLYING)
     for i in range(dy.size):
         dy[i] = 0.0
-    if prm[P_PIEZO] != 0.0:
-        for k in range(model[8]):
+    if model.piezo:
+        for k in range(model.n_actuators):
             dy[4 + 2 * k] = st[1, k]
             dy[5 + 2 * k] = st[2, k]
     if mode == FLYING:
         closest_point(y[0], y[2], st, model, aux)
-        f_att = attraction(model[6], model[7], aux[AUX_GAP])
+        f_att = attraction(model.gap_m, model.attraction_n, aux[AUX_GAP])
         aux[AUX_N] = -f_att
         dy[0] = y[1]
         dy[1] = -base_acc + f_att * aux[AUX_HX] / (aux[AUX_L] * m)
         dy[2] = y[3]
-        dy[3] = -prm[P_GRAVITY] - f_att / (aux[AUX_L] * m)
+        dy[3] = -model.gravity - f_att / (aux[AUX_L] * m)
         return aux[AUX_GAP], math.inf
     contact_load(y[0], y[1], st, base_acc, model, aux)
     n_detach = aux[AUX_N]
-    if prm[P_INCLUDE_WEIGHT] == 0.0:
-        n_detach -= m * prm[P_GRAVITY] / aux[AUX_L]
-    adhesion_margin = n_detach + prm[P_PULL_OFF]
+    if not model.include_weight:
+        n_detach -= m * model.gravity / aux[AUX_L]
+    adhesion_margin = n_detach + model.pull_off
     if mode == STUCK:
-        stick_margin = math.inf if prm[P_THRESHOLD] != 0.0 else aux[AUX_QMAX] - abs(aux[AUX_T_REQ])
+        stick_margin = math.inf if model.threshold else aux[AUX_QMAX] - abs(aux[AUX_T_REQ])
         return stick_margin, adhesion_margin
     friction = -direction * aux[AUX_QMAX]
     dy[0] = y[1]
     dy[1] = (friction - aux[AUX_T_REQ]) / (m * aux[AUX_L])
-    slide_margin = math.inf if prm[P_THRESHOLD] != 0.0 else direction * y[1]
+    slide_margin = math.inf if model.threshold else direction * y[1]
     return slide_margin, adhesion_margin
 
 
@@ -255,7 +285,7 @@ def wave_step(src: tuple, cur: np.ndarray) -> float:
 
 
 @jit
-def rk4_step(mode: int, direction: int, t: float, y: np.ndarray, f0: np.ndarray, h: float, model: tuple,
+def rk4_step(mode: int, direction: int, t: float, y: np.ndarray, f0: np.ndarray, h: float, model: KernelModel,
              src: tuple, cur: np.ndarray, st: np.ndarray, aux: np.ndarray, work: np.ndarray,
              out: np.ndarray) -> None:
     """One classical RK4 step of size ``h`` from (t, y) with slope ``f0`` at its start, into ``out``
@@ -274,7 +304,7 @@ def rk4_step(mode: int, direction: int, t: float, y: np.ndarray, f0: np.ndarray,
 
 @jit
 def dopri5_step(mode: int, direction: int, t: float, y: np.ndarray, f0: np.ndarray, h: float,
-                model: tuple, src: tuple, cur: np.ndarray, st: np.ndarray, aux: np.ndarray,
+                model: KernelModel, src: tuple, cur: np.ndarray, st: np.ndarray, aux: np.ndarray,
                 work: np.ndarray, out: np.ndarray) -> None:
     """The 5th-order Dormand-Prince solution of a step of size ``h`` from (t, y), slope ``f0``, into
     ``out``; stages k2..k6 are left in ``work[0:5]`` for :func:`dopri5_error` and :func:`dopri5_dense`.
@@ -336,7 +366,7 @@ def hermite(theta: float, h: float, y0: np.ndarray, f0: np.ndarray, y1: np.ndarr
 @jit
 def locate_root(which: int, mode: int, direction: int, t: float, h: float, y0: np.ndarray,
                 f0: np.ndarray, y1: np.ndarray, f1: np.ndarray, g_start: float, g_end: float,
-                model: tuple, src: tuple, cur: np.ndarray, st: np.ndarray, aux: np.ndarray,
+                model: KernelModel, src: tuple, cur: np.ndarray, st: np.ndarray, aux: np.ndarray,
                 work: np.ndarray, dense: bool) -> float:
     """Step fraction at which margin ``which`` (0 or 1) first reaches 0 on the step's interpolant
     (``dense``: the Dormand-Prince interpolant of the step just taken; else cubic Hermite).
@@ -346,7 +376,7 @@ def locate_root(which: int, mode: int, direction: int, t: float, h: float, y0: n
     (where the margin is ≤ 0), narrower than the event tolerance; -1 if it could not be located.
     The margin's slope across the final bracket (per second) is left in ``aux[AUX_ROOT_SLOPE]``.
     """
-    tol = model[0][P_EVENT_TOL] / h
+    tol = model.event_tolerance / h
     a, b = 0.0, 1.0
     ga, gb = g_start, g_end
     side = 0
@@ -384,7 +414,7 @@ def locate_root(which: int, mode: int, direction: int, t: float, h: float, y0: n
 
 @jit_inline
 def margins_at(theta: float, mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0: np.ndarray,
-               y1: np.ndarray, f1: np.ndarray, model: tuple, src: tuple, cur: np.ndarray, st: np.ndarray,
+               y1: np.ndarray, f1: np.ndarray, model: KernelModel, src: tuple, cur: np.ndarray, st: np.ndarray,
                aux: np.ndarray, work: np.ndarray, dense: bool) -> tuple[float, float]:
     """Both margins at step fraction ``theta`` on the step's interpolant (as :func:`locate_root`)."""
     yi, dy = work[9], work[10]
@@ -404,7 +434,7 @@ def crossed(value: float, strict: bool) -> bool:
 @jit_inline
 def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0: np.ndarray, y1: np.ndarray,
               f1: np.ndarray, g0: float, g1: float, e0: float, e1: float, fresh: bool, start_known: bool,
-              start_down0: bool, start_down1: bool, model: tuple, src: tuple, cur: np.ndarray, st: np.ndarray,
+              start_down0: bool, start_down1: bool, model: KernelModel, src: tuple, cur: np.ndarray, st: np.ndarray,
               aux: np.ndarray, work: np.ndarray, dense: bool) -> tuple[float, float, float]:
     """Step fraction of a point where a margin, positive at both ends of the step, dips past its event
     inside it (-1 if there is none), and both margins just before the step's end.
@@ -416,7 +446,7 @@ def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0:
     that a margin has at most one local minimum within one step (docs/events.md): a dip longer than the
     event tolerance is found, whatever the step size.
     """
-    tol = model[0][P_EVENT_TOL] / h
+    tol = model.event_tolerance / h
     if tol >= 0.25:
         return -1.0, math.nan, math.nan
     delta = min(1e-3, tol)
@@ -446,7 +476,7 @@ def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0:
 
 @jit
 def brent_dip(which: int, strict: bool, mode: int, direction: int, t: float, h: float, y0: np.ndarray,
-              f0: np.ndarray, y1: np.ndarray, f1: np.ndarray, model: tuple, src: tuple, cur: np.ndarray,
+              f0: np.ndarray, y1: np.ndarray, f1: np.ndarray, model: KernelModel, src: tuple, cur: np.ndarray,
               st: np.ndarray, aux: np.ndarray, work: np.ndarray, dense: bool, tol: float) -> float:
     """Brent's minimisation (parabolic steps, golden-section fallback) of margin ``which`` over the step
     (fractions 0..1) to ``tol``, returning the first fraction found past the event, or -1 when the
@@ -548,17 +578,16 @@ def sign(value: float) -> int:
 
 
 @jit
-def transition(which: int, t: float, y: np.ndarray, model: tuple, src: tuple, cur: np.ndarray,
+def transition(which: int, t: float, y: np.ndarray, model: KernelModel, src: tuple, cur: np.ndarray,
                st: np.ndarray, aux: np.ndarray, iv: np.ndarray, fs: np.ndarray, grazing: bool) -> int:
     """Apply the event of margin ``which`` in the current mode at (t, y) (docs/dynamics.md §1); returns
     the event kind. ``y`` is rewritten for the new mode."""
-    prm = model[0]
     mode = iv[IV_MODE]
     base_acc = strokes_at(t, y, model, src, cur, st, False)
     if mode == FLYING:                                     # landing: keep the tangential velocity
-        _h, hx, _hxx, ht, _htt, _hxt = surface_at(y[0], st[0], st[1], st[2], model[1], model[2],
-                                                  model[0][P_CUT])
-        surface_vz = ht if prm[P_LANDING_RELATIVE] != 0.0 else 0.0
+        _h, hx, _hxx, ht, _htt, _hxt = surface_at(y[0], st[0], st[1], st[2], model.centers, model.widths,
+                                                  model.cutoff_radius)
+        surface_vz = ht if model.landing_relative else 0.0
         xd = (y[1] + hx * (y[3] - surface_vz)) / (1.0 + hx * hx)
         y[1] = xd
         y[2] = 0.0
@@ -568,8 +597,8 @@ def transition(which: int, t: float, y: np.ndarray, model: tuple, src: tuple, cu
         enter(iv, fs, t, SLIDING if xd != 0.0 else STUCK, IV_LANDING, grazing)
         return LANDING
     if which == 1:                                         # take-off with the contact velocity
-        h, hx, _hxx, ht, _htt, _hxt = surface_at(y[0], st[0], st[1], st[2], model[1], model[2],
-                                                  model[0][P_CUT])
+        h, hx, _hxx, ht, _htt, _hxt = surface_at(y[0], st[0], st[1], st[2], model.centers, model.widths,
+                                                  model.cutoff_radius)
         y[2] = h
         y[3] = ht + hx * y[1]
         iv[IV_FRESH] = 1
@@ -591,7 +620,7 @@ def transition(which: int, t: float, y: np.ndarray, model: tuple, src: tuple, cu
 
 
 @jit
-def threshold_decision(t: float, y: np.ndarray, model: tuple, src: tuple, cur: np.ndarray,
+def threshold_decision(t: float, y: np.ndarray, model: KernelModel, src: tuple, cur: np.ndarray,
                        st: np.ndarray, aux: np.ndarray, iv: np.ndarray, fs: np.ndarray) -> int:
     """The seed's threshold-velocity friction logic at the start of a step (contact modes only).
 
@@ -599,11 +628,10 @@ def threshold_decision(t: float, y: np.ndarray, model: tuple, src: tuple, cur: n
     (friction opposes the impending motion); stick (ẋ = 0) otherwise. Returns the event kind of a mode
     change, or -1.
     """
-    prm = model[0]
     base_acc = strokes_at(t, y, model, src, cur, st, False)
     contact_load(y[0], y[1], st, base_acc, model, aux)
     v_rel = y[1] * aux[AUX_L]
-    v_threshold = aux[AUX_QMAX] * prm[P_DT] / prm[P_MASS]
+    v_threshold = aux[AUX_QMAX] * model.dt / model.mass
     if v_rel != 0.0 and abs(v_rel) >= v_threshold:
         new_mode, direction = SLIDING, sign(v_rel)
     elif abs(aux[AUX_T_REQ]) > aux[AUX_QMAX]:
@@ -622,7 +650,7 @@ def threshold_decision(t: float, y: np.ndarray, model: tuple, src: tuple, cur: n
 
 
 @jit
-def observe(t: float, y: np.ndarray, iv: np.ndarray, model: tuple, src: tuple, cur: np.ndarray,
+def observe(t: float, y: np.ndarray, iv: np.ndarray, model: KernelModel, src: tuple, cur: np.ndarray,
             st: np.ndarray, aux: np.ndarray, dy: np.ndarray, row: np.ndarray) -> None:
     """Fill ``row`` with the outputs of docs/dynamics.md §4 at (t, y) (columns ``COLUMN_NAMES``, then the
     actuator strokes). Normal load in flight: −F_att (the attraction, continuous with N at take-off)."""
@@ -635,11 +663,11 @@ def observe(t: float, y: np.ndarray, iv: np.ndarray, model: tuple, src: tuple, c
     row[C_THETA] = math.atan(aux[AUX_HX])
     row[C_N] = aux[AUX_N]
     strokes_at(t, y, model, src, cur, st, True)            # every stroke column exact, felt or not
-    for k in range(model[8]):
+    for k in range(model.n_actuators):
         row[N_FIXED_COLUMNS + k] = st[0, k]
     if mode == FLYING:
-        h, _hx, _hxx, ht, _htt, _hxt = surface_at(y[0], st[0], st[1], st[2], model[1], model[2],
-                                                  model[0][P_CUT])
+        h, _hx, _hxx, ht, _htt, _hxt = surface_at(y[0], st[0], st[1], st[2], model.centers, model.widths,
+                                                  model.cutoff_radius)
         row[C_Z] = y[2]
         row[C_ZD] = y[3]
         row[C_FRICTION] = 0.0
@@ -653,19 +681,60 @@ def observe(t: float, y: np.ndarray, iv: np.ndarray, model: tuple, src: tuple, c
     row[C_ZD] = aux[AUX_HT] + aux[AUX_HX] * y[1]
     row[C_FRICTION] = aux[AUX_T_REQ] if mode == STUCK else -iv[IV_DIR] * aux[AUX_QMAX]
     row[C_QMAX] = aux[AUX_QMAX]
-    row[C_SEPARATION] = interp(model[3], model[5], aux[AUX_N])
+    row[C_SEPARATION] = interp(model.load_n, model.separation_m, aux[AUX_N])
     row[C_GAP] = math.nan
     row[C_H] = aux[AUX_H]
     row[C_HT] = aux[AUX_HT]
 
 
+@jit_inline
+def keep_ahead(t0: float, t1: float, y0: np.ndarray, y1: np.ndarray, which: int, grazing: bool, down0: bool,
+               down1: bool, start_known: bool, ahead: np.ndarray, iv: np.ndarray, fs: np.ndarray) -> None:
+    """Keep the step (t0, y0) -> (t1, y1), taken past the target, for the next call: with the event it
+    ends on (``which`` >= 0) or else what the dip search knows where the following step starts."""
+    copy_into(ahead[0], y0)
+    copy_into(ahead[1], y1)
+    fs[FS_AHEAD_T0], fs[FS_AHEAD_T1] = t0, t1
+    iv[IV_AHEAD_WHICH], iv[IV_AHEAD_GRAZING] = which, grazing
+    iv[IV_START_KNOWN], iv[IV_START_DOWN0], iv[IV_START_DOWN1] = start_known, down0, down1
+
+
+@jit_inline
+def report_at(t_target: float, t0: float, y: np.ndarray, iv: np.ndarray, model: KernelModel, src: tuple,
+              cur: np.ndarray, st: np.ndarray, aux: np.ndarray, scratch: np.ndarray, rec: np.ndarray,
+              n_rec: int) -> int:
+    """Replace ``y``, the state at ``t0``, by the state at ``t_target`` (within the kept step): one step
+    of the run's own method (no error control: it is shorter than the step the control accepted). With
+    ``model.record`` its output row goes to ``rec[n_rec]``; returns the rows used."""
+    mode, direction = iv[IV_MODE], iv[IV_DIR]
+    if mode != STUCK or model.piezo:            # stuck: nothing moves relative to the surface
+        f0, out = scratch[6], scratch[8]
+        evaluate(mode, direction, t0, y, model, src, cur, st, aux, f0)
+        if model.adaptive and not model.threshold:
+            dopri5_step(mode, direction, t0, y, f0, t_target - t0, model, src, cur, st, aux, scratch, out)
+        else:
+            rk4_step(mode, direction, t0, y, f0, t_target - t0, model, src, cur, st, aux, scratch, out)
+        copy_into(y, out)
+    if model.record:
+        observe(t_target, y, iv, model, src, cur, st, aux, scratch[10], rec[n_rec])
+        n_rec += 1
+    return n_rec
+
+
 @jit
-def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, model: tuple, src: tuple,
-            ev_i: np.ndarray, ev_f: np.ndarray, rec: np.ndarray, n_rec: int, scratch: np.ndarray,
-            st: np.ndarray, aux: np.ndarray, cur: np.ndarray) -> tuple[int, int, int]:
+def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_target: float, t_limit: float,
+            model: KernelModel, src: tuple, ev_i: np.ndarray, ev_f: np.ndarray, rec: np.ndarray, n_rec: int,
+            scratch: np.ndarray, st: np.ndarray, aux: np.ndarray, cur: np.ndarray) -> tuple[int, int, int]:
     """Integrate the state (y, iv, fs) from fs[FS_T] to ``t_target`` on the stroke source ``src``.
 
-    Mode changes go to ``ev_i`` (kind, from, to) and ``ev_f`` (t, x); with ``prm[P_RECORD]`` one row
+    Steps are never cut at ``t_target``, so that where a run is split into calls does not change the
+    steps it takes: the step that would pass ``t_target`` is taken whole (up to ``t_limit``, where ``src``
+    stops being valid) and kept in ``ahead`` (2, y.size: its start and end states) with its event, if it
+    ends on one; ``y`` becomes the state at ``t_target``, a step of the same method from the kept step's
+    start. The next call on the same model and source goes on from the kept step; the caller clears it
+    (``fs[FS_AHEAD_T1] = NaN``) whenever the model, the source or the state changes in between.
+
+    Mode changes go to ``ev_i`` (kind, from, to) and ``ev_f`` (t, x); with ``model.record`` one row
     per accepted step and per event goes to ``rec`` from row ``n_rec`` on. Returns (status, number of
     events, rows used). A status other than DONE stops at a consistent state: EVENTS_FULL /
     RECORDS_FULL ask the caller to drain the buffers and call again; NON_FINITE, EVENT_NOT_LOCATED
@@ -673,22 +742,39 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
     allocates): ``scratch`` (N_SCRATCH, y.size), ``st`` (3, channels), ``aux`` (N_AUX,), ``cur`` (channels, 2)
     int64.
     """
-    prm = model[0]
     work = scratch
     f0 = scratch[6]
     f1 = scratch[7]
     y1 = scratch[8]
-    dt = prm[P_DT]
-    tol = prm[P_EVENT_TOL]
-    threshold = prm[P_THRESHOLD] != 0.0
-    adaptive = prm[P_ADAPTIVE] != 0.0 and not threshold
-    dip_search = prm[P_DIP_SEARCH] != 0.0 and not threshold
+    dt = model.dt
+    tol = model.event_tolerance
+    threshold = model.threshold
+    adaptive = model.adaptive and not threshold
+    dip_search = model.dip_search and not threshold
     if fs[FS_H] <= 0.0:
         fs[FS_H] = dt
-    record = prm[P_RECORD] != 0.0
+    record = model.record
     status = DONE
     n_ev = 0
     t = fs[FS_T]
+    if t >= t_target:
+        return status, n_ev, n_rec
+    resume_which = -1
+    if fs[FS_AHEAD_T0] <= t < fs[FS_AHEAD_T1]:      # a step taken past the last target
+        locate_all(src, fs[FS_AHEAD_T0], cur)       # the segments the step was taken on
+        if fs[FS_AHEAD_T1] > t_target:              # ... still ahead of this one: report on it
+            copy_into(y, ahead[0])
+            n_rec = report_at(t_target, fs[FS_AHEAD_T0], y, iv, model, src, cur, st, aux, scratch, rec, n_rec)
+            fs[FS_T] = t_target
+            return status, n_ev, n_rec
+        t = fs[FS_AHEAD_T1]                         # ... ending before it: the step is taken
+        copy_into(y, ahead[1])
+        fs[FS_MAX_SPEED] = max(fs[FS_MAX_SPEED], abs(y[1]))
+        resume_which = iv[IV_AHEAD_WHICH]
+        if resume_which < 0 and record:
+            observe(t, y, iv, model, src, cur, st, aux, work[10], rec[n_rec])
+            n_rec += 1
+    fs[FS_AHEAD_T1] = math.nan
     need_eval = True
     t_next = t
     g0 = g1 = 0.0
@@ -697,7 +783,7 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
     h_cap = 0.0
     h_wave = math.inf
     dip_retries = 0
-    start_known = start_down0 = start_down1 = False
+    start_known, start_down0, start_down1 = iv[IV_START_KNOWN] != 0, iv[IV_START_DOWN0] != 0, iv[IV_START_DOWN1] != 0
     while t < t_target:
         if n_ev + 2 > ev_i.shape[0]:
             status = EVENTS_FULL
@@ -708,6 +794,9 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
         mode = iv[IV_MODE]
         which = -1
         grazing = False
+        if resume_which >= 0:                   # the kept step ended on an event: take it now
+            which, grazing, need_eval = resume_which, iv[IV_AHEAD_GRAZING] != 0, False
+            resume_which = -1
         if need_eval:
             if t >= t_next:                     # a new segment (or the first): point the cursor at it
                 t_next = locate_all(src, t, cur)
@@ -727,12 +816,12 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
                 which = 0
         if which < 0:
             direction = iv[IV_DIR]
-            moving = mode != STUCK or prm[P_PIEZO] != 0.0
+            moving = mode != STUCK or model.piezo
             error_control = adaptive and moving     # Dormand-Prince; else RK4, or stuck checks
             if error_control:
-                h = min(fs[FS_H], dt, t_next - t, t_target - t)
+                h = min(fs[FS_H], dt, t_next - t, t_limit - t)
             else:
-                h = min(dt if moving or threshold else prm[P_CHECK_STEP], t_next - t, t_target - t)
+                h = min(dt if moving or threshold else model.check_step, t_next - t, t_limit - t)
             if dip_search and (error_control or not moving):     # fixed-step RK4 keeps its dt
                 h = min(h, h_wave)
             if h_cap > 0.0:
@@ -748,7 +837,7 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
                 e0, e1 = evaluate(mode, direction, t + h, y1, model, src, cur, st, aux, f1)
                 if not error_control:
                     break
-                err = dopri5_error(h, f0, work, f1, prm[P_TOLERANCE], dt)
+                err = dopri5_error(h, f0, work, f1, model.tolerance, dt)
                 if err <= 1.0 or not math.isfinite(err) or h < 1e-14:
                     fs[FS_H] = h * min(5.0, max(0.2, 0.9 * max(err, 1e-10) ** -0.2))
                     break
@@ -770,7 +859,14 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
                     dip_retries += 1
                     continue
             if not (hit0 or hit1):              # accept the step
-                t = t_next if h == t_next - t else (t_target if h == t_target - t else t + h)
+                t_new = t_next if h == t_next - t else (t_limit if h == t_limit - t else t + h)
+                if t_new > t_target:            # past the target: keep it and report at the target
+                    keep_ahead(t, t_new, y, y1, -1, False, near_end0 > e0, near_end1 > e1,
+                               t_new < t_next and not math.isnan(near_end0), ahead, iv, fs)
+                    n_rec = report_at(t_target, t, y, iv, model, src, cur, st, aux, scratch, rec, n_rec)
+                    t = t_target
+                    break
+                t = t_new
                 copy_into(y, y1)
                 copy_into(f0, f1)
                 g0, g1 = e0, e1
@@ -784,6 +880,7 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
                     n_rec += 1
                 need_eval = t >= t_next or (threshold and mode != FLYING)
                 start_known = not need_eval and not math.isnan(near_end0)
+                iv[IV_START_KNOWN], iv[IV_START_DOWN0], iv[IV_START_DOWN1] = start_known, start_down0, start_down1
                 continue
             theta = 2.0
             if hit0:
@@ -819,10 +916,16 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
                     if abs(g_true) <= -slope * tol:
                         break
                     theta = min(max(theta - g_true / (slope * h), tol / h), 1.0)
-            t += theta * h
+            t_new = t + theta * h
+            grazing = t_new - fs[FS_T_ENTRY] < tol
+            if t_new > t_target:                # the event lies past the target: keep it for later
+                keep_ahead(t, t_new, y, y1, which, grazing, False, False, False, ahead, iv, fs)
+                n_rec = report_at(t_target, t, y, iv, model, src, cur, st, aux, scratch, rec, n_rec)
+                t = t_target
+                break
+            t = t_new
             copy_into(y, y1)
             fs[FS_MAX_SPEED] = max(fs[FS_MAX_SPEED], abs(y[1]))
-            grazing = t - fs[FS_T_ENTRY] < tol
         if t == t_last_event:
             same_instant += 1
             if same_instant > 8:
@@ -841,5 +944,6 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, t_target: float, mode
         need_eval = True
         dip_retries = 0
         start_known = False
+        iv[IV_START_KNOWN] = 0
     fs[FS_T] = t
     return status, n_ev, n_rec

@@ -104,12 +104,16 @@ class FeederState:
         self.iv[k.IV_ENTRY_COUNTER] = -1
         self.fs = np.zeros(k.N_FS)
         self.fs[k.FS_T_ENTRY] = -math.inf
+        self.fs[k.FS_AHEAD_T1] = math.nan
+        self.ahead = np.zeros((2, self.y.size))     # the step taken past the last target (kernel.advance)
+        self.ahead_on: tuple = ()                   # (model, stroke table, its end time) it was taken on
         self.x0 = x0
 
     def copy(self) -> FeederState:
         """An independent copy (to branch a run)."""
         other = FeederState.__new__(FeederState)
-        other.y, other.iv, other.fs, other.x0 = self.y.copy(), self.iv.copy(), self.fs.copy(), self.x0
+        other.y, other.iv, other.fs, other.ahead = self.y.copy(), self.iv.copy(), self.fs.copy(), self.ahead.copy()
+        other.ahead_on, other.x0 = self.ahead_on, self.x0
         return other
 
     @property
@@ -131,6 +135,26 @@ class FeederState:
     def xdot(self) -> float:
         """Velocity along x (m/s): ẋ in contact, v_x in flight."""
         return float(self.y[1])
+
+    @property
+    def z(self) -> float:
+        """Height of the part in flight (m); 0 while on the surface."""
+        return float(self.y[2])
+
+    @property
+    def zdot(self) -> float:
+        """Vertical velocity in flight (m/s); 0 on the surface."""
+        return float(self.y[3])
+
+    @property
+    def piezo_stroke(self) -> np.ndarray:
+        """Each piezo stack's extension (m), a view into the state (zeros unless ``piezo.enabled``)."""
+        return self.y[4::2]
+
+    @property
+    def piezo_velocity(self) -> np.ndarray:
+        """Each piezo stack's extension rate (m/s), a view into the state."""
+        return self.y[5::2]
 
     @property
     def distance(self) -> float:
@@ -201,34 +225,27 @@ class FeederModel:
         if self.contact_model is None:
             object.__setattr__(self, 'contact_model', ContactModel(self.contact, self.particle))
         object.__setattr__(self, '_waveform', waveform_table(self.stroke, self.surface.n_actuators))
-        tables = self.contact_model.tables
-        prm = np.zeros(k.N_PRM)
-        prm[k.P_MASS] = self.particle.mass
-        prm[k.P_GRAVITY] = self.particle.gravity
-        prm[k.P_PULL_OFF] = self.contact_model.pull_off_n
-        prm[k.P_DT] = self.integration.dt
-        prm[k.P_EVENT_TOL] = self.integration.event_tolerance
-        prm[k.P_CONVECTIVE] = self.integration.convective_terms
-        prm[k.P_INCLUDE_WEIGHT] = self.detach.include_weight
-        prm[k.P_LANDING_RELATIVE] = self.landing.velocity == 'relative'
-        prm[k.P_THRESHOLD] = self.integration.friction_logic == 'threshold'
-        prm[k.P_PIEZO] = self.piezo.enabled
-        prm[k.P_PIEZO_OMEGA] = self.piezo.omega_n
-        prm[k.P_PIEZO_ZETA] = self.piezo.damping
-        prm[k.P_PIEZO_MIN] = self.piezo.stroke_min
-        prm[k.P_PIEZO_MAX] = self.piezo.stroke_max
-        prm[k.P_HAS_BASE] = self.base_acceleration is not None
-        prm[k.P_ADAPTIVE] = self.integration.method == 'dopri5'
-        prm[k.P_TOLERANCE] = self.integration.tolerance
-        prm[k.P_CHECK_STEP] = self.integration.check_step
-        prm[k.P_DIP_SEARCH] = self.integration.event_search == 'dips'
-        prm[k.P_CUT] = self.surface.cutoff_radius
-        packed = (prm, np.asarray(self.surface.centers, dtype=float),
-                  np.asarray(self.surface.widths, dtype=float),
-                  *(np.ascontiguousarray(getattr(tables, name), dtype=float)
-                    for name in ('load_n', 'q_max_n', 'separation_m', 'gap_m', 'attraction_n')),
-                  self.surface.n_actuators)
-        object.__setattr__(self, '_packed', packed)
+        surface, integration, piezo = self.surface, self.integration, self.piezo
+        scalars = dict(
+            mass=self.particle.mass, gravity=self.particle.gravity, pull_off=self.contact_model.pull_off_n,
+            dt=integration.dt, tolerance=integration.tolerance, check_step=integration.check_step,
+            event_tolerance=integration.event_tolerance, cutoff_radius=surface.cutoff_radius,
+            piezo_omega=piezo.omega_n, piezo_zeta=piezo.damping, piezo_min=piezo.stroke_min,
+            piezo_max=piezo.stroke_max)
+        flags = dict(
+            adaptive=integration.method == 'dopri5', threshold=integration.friction_logic == 'threshold',
+            dip_search=integration.event_search == 'dips', convective=integration.convective_terms,
+            include_weight=self.detach.include_weight, landing_relative=self.landing.velocity == 'relative',
+            piezo=piezo.enabled, has_base=self.base_acceleration is not None, record=False)
+        tables = {name: np.ascontiguousarray(getattr(self.contact_model.tables, name), dtype=float)
+                  for name in ('load_n', 'q_max_n', 'separation_m', 'gap_m', 'attraction_n')}
+        # one numba type whatever the Python types the settings arrived in (no recompilation)
+        packed = k.KernelModel(
+            **{name: float(value) for name, value in scalars.items()},
+            **{name: bool(value) for name, value in flags.items()}, **tables,
+            centers=np.asarray(surface.centers, dtype=float), widths=np.asarray(surface.widths, dtype=float),
+            n_actuators=int(surface.n_actuators))
+        object.__setattr__(self, '_kernel_model', packed)
 
     @classmethod
     def from_settings(cls, flat: Mapping[str, Any], **overrides: Any) -> FeederModel:
@@ -355,16 +372,17 @@ class FeederModel:
         return table
 
     def _segments(self, t0: float, t1: float, source: StrokeTable | StrokeSchedule | None
-                  ) -> list[tuple[float, tuple]]:
-        """(end time, kernel source) pieces covering (t0, t1] according to the schedule."""
+                  ) -> list[tuple[float, float, StrokeTable]]:
+        """(end time, time the table stops being valid, table) pieces covering (t0, t1] according to the
+        schedule."""
         if not isinstance(source, StrokeSchedule):
-            return [(t1, self._source_table(source).as_tuple())]
+            return [(t1, math.inf, self._waveform if source is None else source)]
         pieces = source.pieces
         out = []
         for i, (t_from, table) in enumerate(pieces):
             t_until = pieces[i + 1][0] if i + 1 < len(pieces) else math.inf
             if t_until > t0 and t_from < t1:
-                out.append((min(t_until, t1), self._source_table(table).as_tuple()))
+                out.append((min(t_until, t1), t_until, table))
         return out
 
     def _observe_row(self, state: FeederState, source: StrokeTable | StrokeSchedule | None
@@ -378,16 +396,14 @@ class FeederModel:
         k.locate_all(src, state.t, cur)
         row = np.zeros((1, k.N_FIXED_COLUMNS + self.n_actuators))
         st = np.zeros((3, n_ch))
-        k.observe(state.t, state.y, state.iv, self._packed, src, cur, st,
+        k.observe(state.t, state.y, state.iv, self._kernel_model, src, cur, st,
                   np.zeros(k.N_AUX), np.zeros(state.y.size), row[0])
         return row, st
 
     def _integrate(self, state: FeederState, t_target: float,
                    source: StrokeTable | StrokeSchedule | None, record: bool
                    ) -> tuple[list[Event], list[np.ndarray]]:
-        prm = self._packed[0].copy()
-        prm[k.P_RECORD] = record
-        packed = (prm, *self._packed[1:])
+        packed = self._kernel_model._replace(record=record)
         ev_i = np.zeros((1024, 3), dtype=np.int64)
         ev_f = np.zeros((1024, 2))
         rec = np.zeros((4096 if record else 2, k.N_FIXED_COLUMNS + self.n_actuators))
@@ -395,12 +411,17 @@ class FeederModel:
         recorded: list[np.ndarray] = []
         scratch = np.zeros((k.N_SCRATCH, state.y.size))
         aux = np.zeros(k.N_AUX)
-        for t_until, src in self._segments(state.t, t_target, source):
+        for t_until, t_limit, table in self._segments(state.t, t_target, source):
+            src = self._source_table(table).as_tuple()
             st = np.zeros((3, src[0].size))
             cur = np.zeros((src[0].size, 2), dtype=np.int64)
+            on = state.ahead_on
+            if not (on and on[0] is self and on[1] is table and on[2] == t_limit):
+                state.fs[k.FS_AHEAD_T1] = math.nan      # taken on another model or source: not valid
+            state.ahead_on = (self, table, t_limit)
             while state.t < t_until:
-                status, n_ev, n_rec = k.advance(state.y, state.iv, state.fs, t_until, packed, src,
-                                                ev_i, ev_f, rec, 0, scratch, st, aux, cur)
+                status, n_ev, n_rec = k.advance(state.y, state.iv, state.fs, state.ahead, t_until, t_limit,
+                                                packed, src, ev_i, ev_f, rec, 0, scratch, st, aux, cur)
                 if n_ev:
                     kinds, olds, news = ev_i[:n_ev].T.tolist()
                     events.extend(map(Event, ev_f[:n_ev, 0].tolist(), [EVENT_KINDS[i] for i in kinds],
