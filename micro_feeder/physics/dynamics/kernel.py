@@ -699,7 +699,7 @@ def keep_ahead(t0: float, t1: float, y0: np.ndarray, y1: np.ndarray, which: int,
     iv[IV_START_KNOWN], iv[IV_START_DOWN0], iv[IV_START_DOWN1] = start_known, down0, down1
 
 
-@jit_inline
+@jit
 def report_at(t_target: float, t0: float, y: np.ndarray, iv: np.ndarray, model: KernelModel, src: tuple,
               cur: np.ndarray, st: np.ndarray, aux: np.ndarray, scratch: np.ndarray, rec: np.ndarray,
               n_rec: int) -> int:
