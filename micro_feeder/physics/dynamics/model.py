@@ -32,6 +32,7 @@ from ..piezo import PiezoParams
 from ..surface import SurfaceParams
 from ..waveforms import StrokeParams, StrokeSchedule, StrokeTable, stack_tables, waveform_table
 from . import kernel as k
+from . import layout
 from .params import DetachParams, IntegrationParams, LandingParams
 
 MODES = ('stuck', 'sliding', 'flying')
@@ -100,11 +101,11 @@ class FeederState:
     def __init__(self, n_actuators: int, x0: float):
         self.y = np.zeros(4 + 2 * n_actuators)
         self.y[0] = x0
-        self.iv = np.zeros(k.N_IV, dtype=np.int64)
-        self.iv[k.IV_ENTRY_COUNTER] = -1
-        self.fs = np.zeros(k.N_FS)
-        self.fs[k.FS_T_ENTRY] = -math.inf
-        self.fs[k.FS_AHEAD_T1] = math.nan
+        self.iv = np.zeros(layout.N_IV, dtype=np.int64)
+        self.iv[layout.IV_ENTRY_COUNTER] = -1
+        self.fs = np.zeros(layout.N_FS)
+        self.fs[layout.FS_T_ENTRY] = -math.inf
+        self.fs[layout.FS_AHEAD_T1] = math.nan
         self.ahead = np.zeros((2, self.y.size))     # the step taken past the last target (kernel.advance)
         self.ahead_on: tuple = ()                   # (model, stroke table, its end time) it was taken on
         self.x0 = x0
@@ -119,12 +120,12 @@ class FeederState:
     @property
     def t(self) -> float:
         """Sim time (s)."""
-        return float(self.fs[k.FS_T])
+        return float(self.fs[layout.FS_T])
 
     @property
     def mode(self) -> str:
         """``stuck``, ``sliding`` or ``flying``."""
-        return MODES[int(self.iv[k.IV_MODE])]
+        return MODES[int(self.iv[layout.IV_MODE])]
 
     @property
     def x(self) -> float:
@@ -164,12 +165,12 @@ class FeederState:
     @property
     def max_speed(self) -> float:
         """Largest |ẋ| (|v_x| in flight) seen so far (m/s)."""
-        return float(self.fs[k.FS_MAX_SPEED])
+        return float(self.fs[layout.FS_MAX_SPEED])
 
     @property
     def transitions(self) -> dict[str, int]:
         """Counters ``stick_to_slip``, ``slip_to_stick``, ``take_off``, ``landing`` (docs/dynamics.md §1)."""
-        return {name: int(self.iv[idx]) for name, idx in zip(COUNTER_NAMES, k.COUNTERS, strict=True)}
+        return {name: int(self.iv[idx]) for name, idx in zip(COUNTER_NAMES, layout.COUNTERS, strict=True)}
 
 
 @dataclass(frozen=True)
@@ -240,7 +241,7 @@ class FeederModel:
         tables = {name: np.ascontiguousarray(getattr(self.contact_model.tables, name), dtype=float)
                   for name in ('load_n', 'q_max_n', 'separation_m', 'gap_m', 'attraction_n')}
         # one numba type whatever the Python types the settings arrived in (no recompilation)
-        packed = k.KernelModel(
+        packed = layout.KernelModel(
             **{name: float(value) for name, value in scalars.items()},
             **{name: bool(value) for name, value in flags.items()}, **tables,
             centers=np.asarray(surface.centers, dtype=float), widths=np.asarray(surface.widths, dtype=float),
@@ -289,8 +290,8 @@ class FeederModel:
         """A part in flight at (x, z) (m) with velocity (vx, vz) (m/s) at time ``t``."""
         state = FeederState(self.n_actuators, x)
         state.y[:4] = x, vx, z, vz
-        state.iv[k.IV_MODE] = k.FLYING
-        state.fs[k.FS_T] = t
+        state.iv[layout.IV_MODE] = layout.FLYING
+        state.fs[layout.FS_T] = t
         return state
 
     def advance(self, state: FeederState, t_target: float,
@@ -350,14 +351,14 @@ class FeederModel:
 
     def columns(self) -> tuple[str, ...]:
         """Names of the recorded columns (then ``stroke_k`` per actuator)."""
-        return k.COLUMN_NAMES + tuple(f'stroke_{i}' for i in range(self.n_actuators))
+        return layout.COLUMN_NAMES + tuple(f'stroke_{i}' for i in range(self.n_actuators))
 
     def observe(self, state: FeederState, source: StrokeTable | StrokeSchedule | None = None) -> Observation:
         """The outputs (docs/dynamics.md §4) at ``state.t`` (does not change the state)."""
         row, st = self._observe_row(state, source)
-        values = dict(zip(k.COLUMN_NAMES, row[0, :k.N_FIXED_COLUMNS].tolist(), strict=True))
+        values = dict(zip(layout.COLUMN_NAMES, row[0, :layout.N_FIXED_COLUMNS].tolist(), strict=True))
         values['mode'] = MODES[int(values['mode'])]
-        return Observation(**values, strokes=row[0, k.N_FIXED_COLUMNS:].copy(),
+        return Observation(**values, strokes=row[0, layout.N_FIXED_COLUMNS:].copy(),
                            stroke_velocities=st[1, :self.n_actuators].copy())
 
     # ------------------------------------------------------------------------------------------------
@@ -394,10 +395,10 @@ class FeederModel:
         n_ch = src[0].size
         cur = np.zeros((n_ch, 2), dtype=np.int64)
         k.locate_all(src, state.t, cur)
-        row = np.zeros((1, k.N_FIXED_COLUMNS + self.n_actuators))
+        row = np.zeros((1, layout.N_FIXED_COLUMNS + self.n_actuators))
         st = np.zeros((3, n_ch))
         k.observe(state.t, state.y, state.iv, self._kernel_model, src, cur, st,
-                  np.zeros(k.N_AUX), np.zeros(state.y.size), row[0])
+                  np.zeros(layout.N_AUX), np.zeros(state.y.size), row[0])
         return row, st
 
     def _integrate(self, state: FeederState, t_target: float,
@@ -406,18 +407,18 @@ class FeederModel:
         packed = self._kernel_model._replace(record=record)
         ev_i = np.zeros((1024, 3), dtype=np.int64)
         ev_f = np.zeros((1024, 2))
-        rec = np.zeros((4096 if record else 2, k.N_FIXED_COLUMNS + self.n_actuators))
+        rec = np.zeros((4096 if record else 2, layout.N_FIXED_COLUMNS + self.n_actuators))
         events: list[Event] = []
         recorded: list[np.ndarray] = []
-        scratch = np.zeros((k.N_SCRATCH, state.y.size))
-        aux = np.zeros(k.N_AUX)
+        scratch = np.zeros((layout.N_SCRATCH, state.y.size))
+        aux = np.zeros(layout.N_AUX)
         for t_until, t_limit, table in self._segments(state.t, t_target, source):
             src = self._source_table(table).as_tuple()
             st = np.zeros((3, src[0].size))
             cur = np.zeros((src[0].size, 2), dtype=np.int64)
             on = state.ahead_on
             if not (on and on[0] is self and on[1] is table and on[2] == t_limit):
-                state.fs[k.FS_AHEAD_T1] = math.nan      # taken on another model or source: not valid
+                state.fs[layout.FS_AHEAD_T1] = math.nan      # taken on another model or source: not valid
             state.ahead_on = (self, table, t_limit)
             while state.t < t_until:
                 status, n_ev, n_rec = k.advance(state.y, state.iv, state.fs, state.ahead, t_until, t_limit,
@@ -429,14 +430,14 @@ class FeederModel:
                                       ev_f[:n_ev, 1].tolist()))
                 if record and n_rec:
                     recorded.append(rec[:n_rec].copy())
-                if status in (k.NON_FINITE, k.EVENT_NOT_LOCATED, k.CHATTER):
+                if status in (layout.NON_FINITE, layout.EVENT_NOT_LOCATED, layout.CHATTER):
                     raise SimulationError(self._failure(status, state))
         return events, recorded
 
     def _failure(self, status: int, state: FeederState) -> str:
-        what = {k.NON_FINITE: 'the state or the contact load became non-finite',
-                k.EVENT_NOT_LOCATED: 'an event could not be located within integration.event_tolerance',
-                k.CHATTER: 'more than 8 mode changes at the same instant (chatter)'}[status]
+        what = {layout.NON_FINITE: 'the state or the contact load became non-finite',
+                layout.EVENT_NOT_LOCATED: 'an event could not be located within integration.event_tolerance',
+                layout.CHATTER: 'more than 8 mode changes at the same instant (chatter)'}[status]
         return (f'{what} at t = {state.t:.9g} s in mode {state.mode} '
                 f'(x = {state.x:.9g} m, state vector {state.y.tolist()}); '
                 f'try a smaller integration.dt')

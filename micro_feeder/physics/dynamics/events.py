@@ -1,0 +1,302 @@
+"""Event location and mode changes: a margin's sign change over a step, its dips inside a step
+(docs/events.md), and the transition applied at an event (docs/dynamics.md §1)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .._jit import jit, jit_inline
+from ..surface import surface_at
+from .layout import (
+    AUX_L,
+    AUX_QMAX,
+    AUX_ROOT_SLOPE,
+    AUX_T_REQ,
+    FLYING,
+    FS_T_ENTRY,
+    IV_DIR,
+    IV_ENTRY_COUNTER,
+    IV_FRESH,
+    IV_LANDING,
+    IV_MODE,
+    IV_PREV_MODE,
+    IV_SLIP_TO_STICK,
+    IV_STICK_TO_SLIP,
+    IV_TAKE_OFF,
+    LANDING,
+    REVERSAL,
+    SLIDING,
+    SLIP_TO_STICK,
+    STICK_TO_SLIP,
+    STUCK,
+    TAKE_OFF,
+    KernelModel,
+)
+from .rhs import contact_load, evaluate, sign, strokes_at
+from .steppers import dopri5_dense, hermite
+
+
+@jit
+def locate_root(which: int, mode: int, direction: int, t: float, h: float, y0: np.ndarray,
+                f0: np.ndarray, y1: np.ndarray, f1: np.ndarray, g_start: float, g_end: float,
+                model: KernelModel, src: tuple, cur: np.ndarray, st: np.ndarray, aux: np.ndarray,
+                work: np.ndarray, dense: bool) -> float:
+    """Step fraction at which margin ``which`` (0 or 1) first reaches 0 on the step's interpolant
+    (``dense``: the Dormand-Prince interpolant of the step just taken; else cubic Hermite).
+
+    Illinois regula falsi, with bisection while the left end is not strictly positive (a margin that
+    is 0 by construction at the start of a fresh mode). Returns the right end of the final bracket
+    (where the margin is ≤ 0), narrower than the event tolerance; -1 if it could not be located.
+    The margin's slope across the final bracket (per second) is left in ``aux[AUX_ROOT_SLOPE]``.
+    """
+    tol = model.event_tolerance / h
+    a, b = 0.0, 1.0
+    ga, gb = g_start, g_end
+    side = 0
+    true_a, true_b = g_start, g_end          # unhalved margins at the bracket ends
+    yi, dy = work[9], work[10]
+    for it in range(200):
+        if b - a <= tol:
+            aux[AUX_ROOT_SLOPE] = (true_b - true_a) / ((b - a) * h)
+            return b
+        if ga > 0.0 and it < 60:
+            theta = b - gb * (b - a) / (gb - ga)
+            theta = min(max(theta, a + 0.25 * tol), b - 0.25 * tol)
+        else:
+            theta = 0.5 * (a + b)
+        if dense:
+            dopri5_dense(theta, h, y0, f0, y1, f1, work, yi)
+        else:
+            hermite(theta, h, y0, f0, y1, f1, yi)
+        if mode == SLIDING and which == 0:  # the slide margin dir·ẋ needs no force evaluation
+            g = direction * yi[1]
+        else:
+            g = evaluate(mode, direction, t + theta * h, yi, model, src, cur, st, aux, dy)[which]
+        if g > 0.0:
+            a, ga, true_a = theta, g, g
+            if side == 1:
+                gb *= 0.5
+            side = 1
+        else:
+            b, gb, true_b = theta, g, g
+            if side == -1:
+                ga *= 0.5
+            side = -1
+    return -1.0
+
+
+@jit_inline
+def margins_at(theta: float, mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0: np.ndarray,
+               y1: np.ndarray, f1: np.ndarray, model: KernelModel, src: tuple, cur: np.ndarray, st: np.ndarray,
+               aux: np.ndarray, work: np.ndarray, dense: bool) -> tuple[float, float]:
+    """Both margins at step fraction ``theta`` on the step's interpolant (as :func:`locate_root`)."""
+    yi, dy = work[9], work[10]
+    if dense:
+        dopri5_dense(theta, h, y0, f0, y1, f1, work, yi)
+    else:
+        hermite(theta, h, y0, f0, y1, f1, yi)
+    return evaluate(mode, direction, t + theta * h, yi, model, src, cur, st, aux, dy)
+
+
+@jit_inline
+def crossed(value: float, strict: bool) -> bool:
+    """A margin past its event: < 0 for the stick margin (stuck holds at |T_req| = Q_max), else ≤ 0."""
+    return value < 0.0 if strict else value <= 0.0
+
+
+@jit_inline
+def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0: np.ndarray, y1: np.ndarray,
+              f1: np.ndarray, g0: float, g1: float, e0: float, e1: float, fresh: bool, start_known: bool,
+              start_down0: bool, start_down1: bool, model: KernelModel, src: tuple, cur: np.ndarray, st: np.ndarray,
+              aux: np.ndarray, work: np.ndarray, dense: bool) -> tuple[float, float, float]:
+    """Step fraction of a point where a margin, positive at both ends of the step, dips past its event
+    inside it (-1 if there is none), and both margins just before the step's end.
+
+    A margin with an interior minimum decreases just after the start and increases just before the end
+    (compared at δ = min(1e-3, event_tolerance / h) inside each end; at the start, when ``start_known``,
+    the previous step's end tells, ``start_down0/1``). Its minimum is then searched (:func:`brent_dip`)
+    to the event tolerance, stopping at the first point past the event. Guarantee, under the assumption
+    that a margin has at most one local minimum within one step (docs/events.md): a dip longer than the
+    event tolerance is found, whatever the step size.
+    """
+    tol = model.event_tolerance / h
+    if tol >= 0.25:
+        return -1.0, math.nan, math.nan
+    delta = min(1e-3, tol)
+    b0, b1 = margins_at(1.0 - delta, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux, work,
+                        dense)
+    if not start_known:
+        a0, a1 = margins_at(delta, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux, work, dense)
+        start_down0, start_down1 = a0 < g0, a1 < g1
+    best = 2.0
+    for which in range(2):
+        start, end = (g0, e0) if which == 0 else (g1, e1)
+        near_end, down = (b0, start_down0) if which == 0 else (b1, start_down1)
+        if not (math.isfinite(start) and math.isfinite(end)) or (which == 0 and fresh):
+            continue
+        strict = mode == STUCK and which == 0
+        if crossed(near_end, strict):
+            theta = 1.0 - delta
+        elif down and near_end < end:
+            theta = brent_dip(which, strict, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux,
+                              work, dense, tol)
+        else:
+            continue
+        if 0.0 < theta < best:
+            best = theta
+    return (best if best <= 1.0 else -1.0), b0, b1
+
+
+@jit
+def brent_dip(which: int, strict: bool, mode: int, direction: int, t: float, h: float, y0: np.ndarray,
+              f0: np.ndarray, y1: np.ndarray, f1: np.ndarray, model: KernelModel, src: tuple, cur: np.ndarray,
+              st: np.ndarray, aux: np.ndarray, work: np.ndarray, dense: bool, tol: float) -> float:
+    """Brent's minimisation (parabolic steps, golden-section fallback) of margin ``which`` over the step
+    (fractions 0..1) to ``tol``, returning the first fraction found past the event, or -1 when the
+    minimum stays short of it."""
+    golden = 0.3819660112501051
+    a, b = 0.0, 1.0
+    x = w = v = golden
+    fx = margins_at(x, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux, work, dense)[which]
+    if crossed(fx, strict):
+        return x
+    fw = fv = fx
+    d = e = 0.0
+    for _ in range(100):
+        xm = 0.5 * (a + b)
+        if abs(x - xm) <= 2.0 * tol - 0.5 * (b - a):
+            break
+        parabolic = False
+        if abs(e) > tol:
+            r = (x - w) * (fx - fv)
+            q = (x - v) * (fx - fw)
+            p = (x - v) * q - (x - w) * r
+            q = 2.0 * (q - r)
+            if q > 0.0:
+                p = -p
+            q = abs(q)
+            if abs(p) < abs(0.5 * q * e) and q * (a - x) < p < q * (b - x):
+                e = d
+                d = p / q
+                parabolic = True
+                if (x + d) - a < 2.0 * tol or b - (x + d) < 2.0 * tol:
+                    d = tol if xm >= x else -tol
+        if not parabolic:
+            e = (a - x) if x >= xm else (b - x)
+            d = golden * e
+        u = x + d if abs(d) >= tol else x + (tol if d > 0.0 else -tol)
+        fu = margins_at(u, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux, work, dense)[which]
+        if crossed(fu, strict):
+            return u
+        if fu <= fx:
+            if u >= x:
+                a = x
+            else:
+                b = x
+            v, w, x = w, x, u
+            fv, fw, fx = fw, fx, fu
+        else:
+            if u < x:
+                a = u
+            else:
+                b = u
+            if fu <= fw or w == x:
+                v, w = w, u
+                fv, fw = fw, fu
+            elif fu <= fv or v in (x, w):
+                v, fv = u, fu
+    return -1.0
+
+
+@jit
+def enter(iv: np.ndarray, fs: np.ndarray, t: float, new_mode: int, counter: int, grazing: bool) -> None:
+    """Switch to ``new_mode`` at ``t`` and count the transition in ``iv[counter]`` (-1: not counted).
+
+    ``grazing``: the mode being left ends (at a located event) within the event tolerance of its start,
+    so it counts as never entered: this transition is not counted, and when the part returns to the
+    mode it came from, the entry into the grazed mode is uncounted too (docs/dynamics.md §1).
+    """
+    if grazing:
+        if new_mode == iv[IV_PREV_MODE] and iv[IV_ENTRY_COUNTER] >= 0:
+            iv[iv[IV_ENTRY_COUNTER]] -= 1
+        counter = -1
+    elif counter >= 0:
+        iv[counter] += 1
+    iv[IV_PREV_MODE] = iv[IV_MODE]
+    iv[IV_MODE] = new_mode
+    iv[IV_ENTRY_COUNTER] = counter
+    fs[FS_T_ENTRY] = t
+
+
+@jit
+def transition(which: int, t: float, y: np.ndarray, model: KernelModel, src: tuple, cur: np.ndarray,
+               st: np.ndarray, aux: np.ndarray, iv: np.ndarray, fs: np.ndarray, grazing: bool) -> int:
+    """Apply the event of margin ``which`` in the current mode at (t, y) (docs/dynamics.md §1); returns
+    the event kind. ``y`` is rewritten for the new mode."""
+    mode = iv[IV_MODE]
+    base_acc = strokes_at(t, y, model, src, cur, st, False)
+    if mode == FLYING:                                     # landing: keep the tangential velocity
+        _h, hx, _hxx, ht, _htt, _hxt = surface_at(y[0], st[0], st[1], st[2], model.centers, model.widths,
+                                                  model.cutoff_radius)
+        surface_vz = ht if model.landing_relative else 0.0
+        xd = (y[1] + hx * (y[3] - surface_vz)) / (1.0 + hx * hx)
+        y[1] = xd
+        y[2] = 0.0
+        y[3] = 0.0
+        iv[IV_DIR] = sign(xd)
+        iv[IV_FRESH] = 0
+        enter(iv, fs, t, SLIDING if xd != 0.0 else STUCK, IV_LANDING, grazing)
+        return LANDING
+    if which == 1:                                         # take-off with the contact velocity
+        h, hx, _hxx, ht, _htt, _hxt = surface_at(y[0], st[0], st[1], st[2], model.centers, model.widths,
+                                                  model.cutoff_radius)
+        y[2] = h
+        y[3] = ht + hx * y[1]
+        iv[IV_FRESH] = 1
+        enter(iv, fs, t, FLYING, IV_TAKE_OFF, grazing)
+        return TAKE_OFF
+    y[1] = 0.0
+    contact_load(y[0], 0.0, st, base_acc, model, aux)
+    if mode == STUCK:                                      # friction opposes the impending motion
+        iv[IV_DIR] = -sign(aux[AUX_T_REQ])
+        iv[IV_FRESH] = 1
+        enter(iv, fs, t, SLIDING, IV_STICK_TO_SLIP, grazing)
+        return STICK_TO_SLIP
+    if abs(aux[AUX_T_REQ]) <= aux[AUX_QMAX]:               # sliding came to rest and can stay
+        enter(iv, fs, t, STUCK, IV_SLIP_TO_STICK, grazing)
+        return SLIP_TO_STICK
+    iv[IV_DIR] = -sign(aux[AUX_T_REQ])                     # slides back the other way (not counted)
+    iv[IV_FRESH] = 1
+    return REVERSAL
+
+
+@jit
+def threshold_decision(t: float, y: np.ndarray, model: KernelModel, src: tuple, cur: np.ndarray,
+                       st: np.ndarray, aux: np.ndarray, iv: np.ndarray, fs: np.ndarray) -> int:
+    """The seed's threshold-velocity friction logic at the start of a step (contact modes only).
+
+    V_th = Q_max dt / m. Slip if |v_rel| ≥ V_th (friction opposes v_rel), or if |T_req| > Q_max
+    (friction opposes the impending motion); stick (ẋ = 0) otherwise. Returns the event kind of a mode
+    change, or -1.
+    """
+    base_acc = strokes_at(t, y, model, src, cur, st, False)
+    contact_load(y[0], y[1], st, base_acc, model, aux)
+    v_rel = y[1] * aux[AUX_L]
+    v_threshold = aux[AUX_QMAX] * model.dt / model.mass
+    if v_rel != 0.0 and abs(v_rel) >= v_threshold:
+        new_mode, direction = SLIDING, sign(v_rel)
+    elif abs(aux[AUX_T_REQ]) > aux[AUX_QMAX]:
+        new_mode, direction = SLIDING, -sign(aux[AUX_T_REQ])
+    else:
+        new_mode, direction = STUCK, 0
+        y[1] = 0.0
+    iv[IV_DIR] = direction
+    if new_mode == iv[IV_MODE]:
+        return -1
+    if new_mode == SLIDING:
+        enter(iv, fs, t, SLIDING, IV_STICK_TO_SLIP, False)
+        return STICK_TO_SLIP
+    enter(iv, fs, t, STUCK, IV_SLIP_TO_STICK, False)
+    return SLIP_TO_STICK

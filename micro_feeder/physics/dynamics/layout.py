@@ -1,0 +1,96 @@
+"""The compiled kernel's data layout: the immutable :class:`KernelModel` (MuJoCo's ``mjModel``) and the
+named indices into the evolving arrays (``mjData``) and the output rows.
+
+Data passed around the kernel (all SI):
+
+* ``model``: a :class:`KernelModel`, the immutable inputs by name;
+* ``src``: a :class:`~micro_feeder.physics.waveforms.StrokeTable` as a tuple; channels 0..n_act-1 are
+  the actuators, channel n_act (present when ``model.has_base``) the horizontal base acceleration of
+  the test-only flat-surface check (its s̈ is the base acceleration);
+* ``y``: state vector. In contact ``[x, ẋ, 0, 0]``, in flight ``[x, v_x, z, v_z]``; then, with the piezo
+  model, ``[s_k, ṡ_k]`` per actuator;
+* ``iv`` (int64) and ``fs`` (float64): discrete state and bookkeeping, indexed by ``IV_*`` / ``FS_*``;
+* ``aux``: quantities of the last right-hand-side evaluation, indexed by ``AUX_*``.
+
+Every mode has two *margins*, positive while the mode lasts; an event is a margin reaching 0:
+stuck: Q_max − |T_req| and N_det + F_po; sliding: dir·ẋ and N_det + F_po; flying: the gap δ.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+STUCK, SLIDING, FLYING = 0, 1, 2
+
+
+class KernelModel(NamedTuple):
+    """Everything the kernel reads and never changes, by name (SI units): built by
+    :class:`~micro_feeder.physics.dynamics.model.FeederModel`. numba compiles it as a typed tuple."""
+
+    mass: float                 # particle mass (kg)
+    gravity: float              # g (m/s²)
+    pull_off: float             # pull-off force F_po (N)
+    dt: float                   # RK4 step / largest DOPRI5 step (s)
+    tolerance: float            # DOPRI5 error allowed per step on positions (m)
+    check_step: float           # largest step while stuck (s)
+    event_tolerance: float      # time tolerance of event location (s)
+    cutoff_radius: float        # surface.cutoff as a radius in widths (inf: exact sum; docs/dynamics.md)
+    piezo_omega: float          # piezo stack natural angular frequency (rad/s)
+    piezo_zeta: float           # piezo stack damping ratio
+    piezo_min: float            # piezo travel limits (m)
+    piezo_max: float
+    adaptive: bool              # DOPRI5 (else fixed-step RK4)
+    threshold: bool             # the seed's threshold-velocity friction logic (else exact events)
+    dip_search: bool            # event_search 'dips': margins' minima inside steps are searched
+    convective: bool            # 2 h_xt ẋ + h_xx ẋ² kept in the normal load
+    include_weight: bool        # take-off test with the weight inside N
+    landing_relative: bool      # landing keeps the velocity relative to the surface
+    piezo: bool                 # piezo stack dynamics integrated (state y[4:])
+    has_base: bool              # test-only base-acceleration channel after the actuators
+    record: bool                # write one output row per step and event
+    centers: np.ndarray         # actuator centres (m)
+    widths: np.ndarray          # actuator widths (m)
+    load_n: np.ndarray          # contact tables: normal load (N) ...
+    q_max_n: np.ndarray         # ... and Q_max at that load (N), separation (m) at that load
+    separation_m: np.ndarray
+    gap_m: np.ndarray           # flight table: gap (m) ...
+    attraction_n: np.ndarray    # ... and adhesive attraction (N)
+    n_actuators: int
+
+
+# iv: discrete state. IV_ENTRY_COUNTER: the counter incremented when the current mode was entered (-1
+# none), IV_PREV_MODE: the mode before it; both serve "a mode that ends within the event tolerance of
+# its start is treated as not entered".
+# IV_AHEAD_*: the step taken past the last target (see ``advance``); IV_START_*: what the dip search
+# knows about the margins' slopes where the next step starts.
+(IV_MODE, IV_DIR, IV_FRESH, IV_STICK_TO_SLIP, IV_SLIP_TO_STICK, IV_TAKE_OFF, IV_LANDING,
+ IV_ENTRY_COUNTER, IV_PREV_MODE, IV_AHEAD_WHICH, IV_AHEAD_GRAZING, IV_START_KNOWN, IV_START_DOWN0,
+ IV_START_DOWN1) = range(14)
+N_IV = 14
+COUNTERS = (IV_STICK_TO_SLIP, IV_SLIP_TO_STICK, IV_TAKE_OFF, IV_LANDING)
+
+# fs: continuous bookkeeping (FS_H: the adaptive step size to try next; FS_AHEAD_T0/T1: start and end of
+# the step taken past the last target, T1 NaN when there is none)
+FS_T, FS_T_ENTRY, FS_MAX_SPEED, FS_H, FS_AHEAD_T0, FS_AHEAD_T1 = range(6)
+N_FS = 6
+N_SCRATCH = 11
+
+# aux: quantities of the last evaluation
+(AUX_N, AUX_T_REQ, AUX_QMAX, AUX_L, AUX_H, AUX_HX, AUX_HT, AUX_GAP, AUX_XS, AUX_LOAD_INDEX,
+ AUX_ROOT_SLOPE) = range(11)
+N_AUX = 11
+
+# Columns of a recorded row (then one stroke column per actuator).
+(C_T, C_MODE, C_X, C_Z, C_XD, C_ZD, C_THETA, C_N, C_FRICTION, C_QMAX, C_SEPARATION, C_GAP, C_H,
+ C_HT) = range(14)
+N_FIXED_COLUMNS = 14
+COLUMN_NAMES = ('t', 'mode', 'x', 'z', 'xdot', 'zdot', 'theta', 'normal_load', 'friction', 'q_max',
+                'separation', 'gap', 'surface_height', 'surface_velocity')
+
+# Kernel return codes.
+DONE, EVENTS_FULL, RECORDS_FULL, NON_FINITE, EVENT_NOT_LOCATED, CHATTER = range(6)
+
+# Event kinds (recorded with each mode change); REVERSAL: a slide changing direction (not counted).
+STICK_TO_SLIP, SLIP_TO_STICK, TAKE_OFF, LANDING, REVERSAL = range(5)

@@ -1,0 +1,217 @@
+"""The right-hand side of the particle dynamics in each mode, and the two margins of that mode
+(docs/dynamics.md §1); compiled by numba (``NUMBA_DISABLE_JIT=1`` runs the same code as Python)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .._jit import jit, jit_inline
+from ..piezo import piezo_acceleration
+from ..surface import surface_at
+from ..waveforms import COEF_OMEGA, channel_value, locate_segment, segment_end
+from .layout import (
+    AUX_GAP,
+    AUX_H,
+    AUX_HT,
+    AUX_HX,
+    AUX_L,
+    AUX_LOAD_INDEX,
+    AUX_N,
+    AUX_QMAX,
+    AUX_T_REQ,
+    AUX_XS,
+    FLYING,
+    STUCK,
+    KernelModel,
+)
+
+
+@jit_inline
+def interp(xs: np.ndarray, ys: np.ndarray, x: float) -> float:
+    """Linear interpolation in a table with increasing ``xs``, extrapolated linearly at both ends."""
+    n = xs.size
+    i = min(max(int(np.searchsorted(xs, x)) - 1, 0), n - 2)
+    return ys[i] + (x - xs[i]) * (ys[i + 1] - ys[i]) / (xs[i + 1] - xs[i])
+
+
+@jit_inline
+def interp_near(xs: np.ndarray, ys: np.ndarray, x: float, aux: np.ndarray, slot: int) -> float:
+    """:func:`interp`, searching from the interval found last time (kept in ``aux[slot]``): the load
+    changes little between evaluations, so this walks 0-2 intervals instead of bisecting the table."""
+    last = xs.size - 2
+    i = min(max(int(aux[slot]), 0), last)
+    while i > 0 and x < xs[i]:
+        i -= 1
+    while i < last and x >= xs[i + 1]:
+        i += 1
+    aux[slot] = i
+    return ys[i] + (x - xs[i]) * (ys[i + 1] - ys[i]) / (xs[i + 1] - xs[i])
+
+
+@jit_inline
+def attraction(gap_m: np.ndarray, attraction_n: np.ndarray, gap: float) -> float:
+    """F_att(δ) ≥ 0 (N): table, then the (ε/d)² tail beyond its last gap; δ < 0 reads as 0."""
+    last = gap_m.size - 1
+    if gap >= gap_m[last]:
+        return attraction_n[last] * (gap_m[last] / gap) ** 2
+    return interp(gap_m, attraction_n, max(gap, 0.0))
+
+
+@jit_inline
+def strokes_at(t: float, y: np.ndarray, model: KernelModel, src: tuple, cur: np.ndarray,
+               st: np.ndarray, every: bool) -> float:
+    """Fill ``st`` (3, channels) with s, ṡ, s̈ at ``t`` on the segments ``cur``; return the base
+    acceleration (m/s², 0 without the test-only base channel). With the piezo model the actuators'
+    s, ṡ come from the state and s̈ from the stack dynamics driven by the commanded stroke.
+
+    Unless ``every`` (or with the piezo model, whose every stack is integrated), an actuator that
+    ``surface_at`` skips at x = y[0] (beyond ``model.cutoff_radius`` widths) reads 0 instead of its stroke."""
+    n_act = model.n_actuators
+    skip = not every and not model.piezo
+    for k in range(st.shape[1]):
+        if skip and k < n_act and abs((y[0] - model.centers[k]) / model.widths[k]) > model.cutoff_radius:
+            st[0, k] = st[1, k] = st[2, k] = 0.0
+            continue
+        s, sd, sdd = channel_value(src, k, cur[k, 0], cur[k, 1], t)
+        st[0, k] = s
+        st[1, k] = sd
+        st[2, k] = sdd
+    if model.piezo:
+        for k in range(n_act):
+            s = y[4 + 2 * k]
+            sd = y[5 + 2 * k]
+            st[2, k] = piezo_acceleration(st[0, k], s, sd, model.piezo_omega, model.piezo_zeta,
+                                          model.piezo_min, model.piezo_max)
+            st[0, k] = s
+            st[1, k] = sd
+    return st[2, n_act] if model.has_base else 0.0
+
+
+@jit_inline
+def contact_load(x: float, xd: float, st: np.ndarray, base_acc: float, model: KernelModel,
+                 aux: np.ndarray) -> None:
+    """Normal load N, required friction T_req and Q_max(N) for a part on the surface at (x, ẋ).
+
+    N = m (h_tt + 2 h_xt ẋ + h_xx ẋ² + g − h_x a_b) / L, T_req = N h_x + m L a_b (a_b: base
+    acceleration, 0 except in the flat-surface check), and ẍ = (T − T_req) / (m L).
+    """
+    m = model.mass
+    h, hx, hxx, ht, htt, hxt = surface_at(x, st[0], st[1], st[2], model.centers, model.widths, model.cutoff_radius)
+    length = math.sqrt(1.0 + hx * hx)
+    normal_acc = htt + model.gravity - hx * base_acc
+    if model.convective:
+        normal_acc += 2.0 * hxt * xd + hxx * xd * xd
+    n = m * normal_acc / length
+    aux[AUX_N] = n
+    aux[AUX_T_REQ] = n * hx + m * length * base_acc
+    aux[AUX_QMAX] = interp_near(model.load_n, model.q_max_n, n, aux, AUX_LOAD_INDEX)
+    aux[AUX_L] = length
+    aux[AUX_H] = h
+    aux[AUX_HX] = hx
+    aux[AUX_HT] = ht
+
+
+@jit
+def closest_point(x: float, z: float, st: np.ndarray, model: KernelModel, aux: np.ndarray) -> None:
+    """Closest surface point to (x, z) by Newton on its abscissa x_s; sets AUX_XS, AUX_H, AUX_HX (at
+    x_s), AUX_L and AUX_GAP = signed distance along the normal there (> 0 above the surface)."""
+    centers, widths = model.centers, model.widths
+    xs = x
+    for _ in range(20):
+        h, hx, hxx, _ht, _htt, _hxt = surface_at(xs, st[0], st[1], st[2], centers, widths, model.cutoff_radius)
+        step = ((xs - x) + (h - z) * hx) / (1.0 + hx * hx + (h - z) * hxx)
+        xs -= step
+        if abs(step) <= 1e-15 + 1e-13 * abs(xs):
+            break
+    h, hx, _hxx, _ht, _htt, _hxt = surface_at(xs, st[0], st[1], st[2], centers, widths, model.cutoff_radius)
+    length = math.sqrt(1.0 + hx * hx)
+    aux[AUX_XS] = xs
+    aux[AUX_H] = h
+    aux[AUX_HX] = hx
+    aux[AUX_L] = length
+    aux[AUX_GAP] = ((z - h) - hx * (x - xs)) / length
+
+
+@jit_inline
+def evaluate(mode: int, direction: int, t: float, y: np.ndarray, model: KernelModel, src: tuple,
+             cur: np.ndarray, st: np.ndarray, aux: np.ndarray, dy: np.ndarray) -> tuple[float, float]:
+    """Right-hand side ``dy`` of mode ``mode`` at (t, y), and the mode's two margins."""
+    m = model.mass
+    base_acc = strokes_at(t, y, model, src, cur, st, mode == FLYING)
+    for i in range(dy.size):
+        dy[i] = 0.0
+    if model.piezo:
+        for k in range(model.n_actuators):
+            dy[4 + 2 * k] = st[1, k]
+            dy[5 + 2 * k] = st[2, k]
+    if mode == FLYING:
+        closest_point(y[0], y[2], st, model, aux)
+        f_att = attraction(model.gap_m, model.attraction_n, aux[AUX_GAP])
+        aux[AUX_N] = -f_att
+        dy[0] = y[1]
+        dy[1] = -base_acc + f_att * aux[AUX_HX] / (aux[AUX_L] * m)
+        dy[2] = y[3]
+        dy[3] = -model.gravity - f_att / (aux[AUX_L] * m)
+        return aux[AUX_GAP], math.inf
+    contact_load(y[0], y[1], st, base_acc, model, aux)
+    n_detach = aux[AUX_N]
+    if not model.include_weight:
+        n_detach -= m * model.gravity / aux[AUX_L]
+    adhesion_margin = n_detach + model.pull_off
+    if mode == STUCK:
+        stick_margin = math.inf if model.threshold else aux[AUX_QMAX] - abs(aux[AUX_T_REQ])
+        return stick_margin, adhesion_margin
+    friction = -direction * aux[AUX_QMAX]
+    dy[0] = y[1]
+    dy[1] = (friction - aux[AUX_T_REQ]) / (m * aux[AUX_L])
+    slide_margin = math.inf if model.threshold else direction * y[1]
+    return slide_margin, adhesion_margin
+
+
+@jit
+def locate_all(src: tuple, t: float, cur: np.ndarray) -> float:
+    """Point ``cur`` at the segments active at ``t`` (right side); return the next breakpoint."""
+    t_next = math.inf
+    for k in range(cur.shape[0]):
+        j, i = locate_segment(src, k, t)
+        cur[k, 0] = j
+        cur[k, 1] = i
+        t_next = min(t_next, segment_end(src, k, j, i))
+    return t_next
+
+
+@jit
+def wave_step(src: tuple, cur: np.ndarray) -> float:
+    """Largest step (s) that keeps each margin to one local extremum per step: an eighth of the period of
+    the fastest sinusoid in the active segments (a margin mixes strokes nonlinearly, doubling their
+    frequency); inf when no segment has one."""
+    seg_coef = src[6]
+    fastest = 0.0
+    for k in range(cur.shape[0]):
+        if cur[k, 0] >= 0:
+            fastest = max(fastest, abs(seg_coef[k, cur[k, 1], COEF_OMEGA]))
+    return math.pi / (4.0 * fastest) if fastest > 0.0 else math.inf
+
+
+@jit_inline
+def copy_into(target: np.ndarray, values: np.ndarray) -> None:
+    """target[:] = values, element by element (a slice assignment may allocate a temporary)."""
+    for i in range(values.size):
+        target[i] = values[i]
+
+
+@jit_inline
+def finite(values: np.ndarray) -> bool:
+    """True when every entry is finite (an explicit loop: numba compiles no generator expressions)."""
+    for v in values:  # noqa: SIM110
+        if not math.isfinite(v):
+            return False
+    return True
+
+
+@jit_inline
+def sign(value: float) -> int:
+    """+1, -1 or 0."""
+    return 1 if value > 0.0 else (-1 if value < 0.0 else 0)
