@@ -118,7 +118,7 @@ def describe_runs(job: Job, plan: RunPlan) -> str:
             parts.append(text)
     parts += [f'{a.name} = {a.value(0):g}' for a in getattr(plan.design, 'axes', ()) if len(a) == 1]
     end = (f'runs of {job.duration:g} s' if job.duration else
-           f'runs end {model.integration.settling_time * 1e3:g} ms after the last stroke')
+           f'runs end when the part rests (at most {model.integration.settle_max:g} s after the last stroke)')
     return ', '.join(parts) + f'; {end}'
 
 
