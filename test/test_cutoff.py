@@ -61,23 +61,27 @@ def test_invalid_cutoff_refused(cutoff):
         SurfaceParams(cutoff=cutoff)
 
 
-def travelling_wave(n, cutoff):
+def travelling_wave(n, cutoff, frequency=1000.0):
     """A travelling wave on n actuators 0.5 mm apart (config/travelling_wave.yaml, widened)."""
     return FeederModel.from_settings({
         'particle.x0': 1.0e-3, 'surface.centers': [0.5e-3 * k - 5e-3 for k in range(n)],
-        'surface.widths': [0.4e-3] * n, 'stroke.amplitude': 150e-6, 'stroke.frequency': 1000.0,
+        'surface.widths': [0.4e-3] * n, 'stroke.amplitude': 150e-6, 'stroke.frequency': frequency,
         'stroke.phases': [(0.2 * k) % 1.0 for k in range(n)], 'stroke.count': 20, 'surface.cutoff': cutoff})
 
 
-def test_travelling_wave_same_with_cutoff():
-    """32 actuators, 20 strokes: the same distance and transitions with cutoff 1e-12 as exact."""
+@pytest.mark.parametrize('frequency', [1000.0, 3000.0])
+def test_travelling_wave_same_with_cutoff(frequency):
+    """32 actuators, 20 strokes: the same distance and transitions with cutoff 1e-12 as exact, in contact
+    (1 kHz) and with flights (3 kHz: in flight the strokes of actuators one width beyond the cutoff radius
+    are evaluated too, because the closest surface point is not under the part)."""
     results = []
     for cutoff in (0.0, 1e-12):
-        model = travelling_wave(32, cutoff)
+        model = travelling_wave(32, cutoff, frequency)
         state = model.initial_state()
-        model.advance(state, 0.02)
+        model.run(state=state)
         results.append((state.distance, state.transitions))
     (exact, exact_counts), (cut, cut_counts) = results
     assert abs(exact - cut) <= 1e-9
     assert exact_counts == cut_counts
     assert sum(exact_counts.values()) > 0 and abs(exact) > 1e-7
+    assert (exact_counts['take_off'] > 0) == (frequency > 2000.0)

@@ -236,7 +236,7 @@ def transition(which: int, t: float, y: np.ndarray, model: KernelModel, src: tup
     """Apply the event of margin ``which`` in the current mode at (t, y) (docs/dynamics.md §1); returns
     the event kind. ``y`` is rewritten for the new mode."""
     mode = iv[IV_MODE]
-    base_acc = strokes_at(t, y, model, src, cur, st, False)
+    base_acc = strokes_at(t, y, model, src, cur, st, 0.0)
     if mode == FLYING:                                     # landing: keep the tangential velocity
         _h, hx, _hxx, ht, _htt, _hxt = surface_at(y[0], st[0], st[1], st[2], model.centers, model.widths,
                                                   model.cutoff_radius)
@@ -281,7 +281,7 @@ def threshold_decision(t: float, y: np.ndarray, model: KernelModel, src: tuple, 
     (friction opposes the impending motion); stick (ẋ = 0) otherwise. Returns the event kind of a mode
     change, or -1.
     """
-    base_acc = strokes_at(t, y, model, src, cur, st, False)
+    base_acc = strokes_at(t, y, model, src, cur, st, 0.0)
     contact_load(y[0], y[1], st, base_acc, model, aux)
     v_rel = y[1] * aux[AUX_L]
     v_threshold = aux[AUX_QMAX] * model.dt / model.mass

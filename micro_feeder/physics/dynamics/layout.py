@@ -37,6 +37,7 @@ class KernelModel(NamedTuple):
     check_step: float           # largest step while stuck (s)
     event_tolerance: float      # time tolerance of event location (s)
     cutoff_radius: float        # surface.cutoff as a radius in widths (inf: exact sum; docs/dynamics.md)
+    min_width: float            # the narrowest actuator width (m)
     piezo_omega: float          # piezo stack natural angular frequency (rad/s)
     piezo_zeta: float           # piezo stack damping ratio
     piezo_min: float            # piezo travel limits (m)

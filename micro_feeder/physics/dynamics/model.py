@@ -231,6 +231,7 @@ class FeederModel:
             mass=self.particle.mass, gravity=self.particle.gravity, pull_off=self.contact_model.pull_off_n,
             dt=integration.dt, tolerance=integration.tolerance, check_step=integration.check_step,
             event_tolerance=integration.event_tolerance, cutoff_radius=surface.cutoff_radius,
+            min_width=min(surface.widths),
             piezo_omega=piezo.omega_n, piezo_zeta=piezo.damping, piezo_min=piezo.stroke_min,
             piezo_max=piezo.stroke_max)
         flags = dict(

@@ -59,19 +59,26 @@ def attraction(gap_m: np.ndarray, attraction_n: np.ndarray, gap: float) -> float
     return interp(gap_m, attraction_n, max(gap, 0.0))
 
 
+# In flight the closest surface point x_s is not at the part's x: strokes are evaluated one width farther
+# than the cutoff radius (then every actuator surface_at includes at x_s is evaluated while |x_s - x| is
+# within the narrowest width; beyond, evaluate() takes them all).
+FLIGHT_REACH = 1.0
+
+
 @jit_inline
 def strokes_at(t: float, y: np.ndarray, model: KernelModel, src: tuple, cur: np.ndarray,
-               st: np.ndarray, every: bool) -> float:
+               st: np.ndarray, reach: float) -> float:
     """Fill ``st`` (3, channels) with s, ṡ, s̈ at ``t`` on the segments ``cur``; return the base
     acceleration (m/s², 0 without the test-only base channel). With the piezo model the actuators'
     s, ṡ come from the state and s̈ from the stack dynamics driven by the commanded stroke.
 
-    Unless ``every`` (or with the piezo model, whose every stack is integrated), an actuator that
-    ``surface_at`` skips at x = y[0] (beyond ``model.cutoff_radius`` widths) reads 0 instead of its stroke."""
+    An actuator farther than ``model.cutoff_radius + reach`` of its widths from x = y[0] reads 0 instead of
+    its stroke (``reach`` 0: those ``surface_at`` skips at x; ``inf``: every stroke, as with the piezo model,
+    whose every stack is integrated)."""
     n_act = model.n_actuators
-    skip = not every and not model.piezo
+    radius = math.inf if model.piezo else model.cutoff_radius + reach
     for k in range(st.shape[1]):
-        if skip and k < n_act and abs((y[0] - model.centers[k]) / model.widths[k]) > model.cutoff_radius:
+        if k < n_act and abs((y[0] - model.centers[k]) / model.widths[k]) > radius:
             st[0, k] = st[1, k] = st[2, k] = 0.0
             continue
         s, sd, sdd = channel_value(src, k, cur[k, 0], cur[k, 1], t)
@@ -139,7 +146,7 @@ def evaluate(mode: int, direction: int, t: float, y: np.ndarray, model: KernelMo
              cur: np.ndarray, st: np.ndarray, aux: np.ndarray, dy: np.ndarray) -> tuple[float, float]:
     """Right-hand side ``dy`` of mode ``mode`` at (t, y), and the mode's two margins."""
     m = model.mass
-    base_acc = strokes_at(t, y, model, src, cur, st, mode == FLYING)
+    base_acc = strokes_at(t, y, model, src, cur, st, FLIGHT_REACH if mode == FLYING else 0.0)
     for i in range(dy.size):
         dy[i] = 0.0
     if model.piezo:
@@ -148,6 +155,9 @@ def evaluate(mode: int, direction: int, t: float, y: np.ndarray, model: KernelMo
             dy[5 + 2 * k] = st[2, k]
     if mode == FLYING:
         closest_point(y[0], y[2], st, model, aux)
+        if abs(aux[AUX_XS] - y[0]) > FLIGHT_REACH * model.min_width:     # beyond the strokes evaluated:
+            strokes_at(t, y, model, src, cur, st, math.inf)              # take them all and look again
+            closest_point(y[0], y[2], st, model, aux)
         f_att = attraction(model.gap_m, model.attraction_n, aux[AUX_GAP])
         aux[AUX_N] = -f_att
         dy[0] = y[1]
