@@ -102,6 +102,7 @@ class FeedController(Node):
         self.last_x = float('nan')
         self.last_t = 0.0
         self.commands_sent = 0
+        self._told_waiting = False
 
     # -- state in ------------------------------------------------------------------------------------
 
@@ -144,6 +145,8 @@ class FeedController(Node):
         if not at_rest:
             self._grant_step()
             return
+        if not self._lockstep and not self._simulator_listens():
+            return
         if self._burst is not None:
             self.planner.observe(self._burst, self._burst_from_x, x)
             self._burst = None
@@ -152,6 +155,18 @@ class FeedController(Node):
             self._finish(t, x)
             return
         self._fire(burst, t, x)
+
+    def _simulator_listens(self) -> bool:
+        """Real-time mode: has ``actuator/trajectory`` a subscriber yet? A burst sent before it has one is
+        lost (or, on a half-made match, delivered late and joined mid-stroke); the state keeps coming, so
+        the controller decides again on the next one. Said once in the log while waiting."""
+        if self._pub_trajectory.get_subscription_count() > 0:
+            return True
+        if not self._told_waiting:
+            self._told_waiting = True
+            self.get_logger().info('waiting for a subscriber on actuator/trajectory (the simulator) before '
+                                   'the first burst')
+        return False
 
     def _fire(self, burst: Burst, t: float, x: float) -> None:
         """Send ``burst`` stamped to start at t + ``command_lead`` + the wall time spent building it (sim
