@@ -32,7 +32,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .waveforms import COEF_COS, COEF_OMEGA, COEF_SIN, N_POLY, StrokeParams, StrokeTable, waveform_table
+from ._jit import jit
+from .waveforms import (
+    N_POLY,
+    StrokeParams,
+    StrokeTable,
+    sample_into,
+    sixth_derivative_bound,
+    waveform_table,
+)
 
 KNOT_TOLERANCE = 1e-13       # m: interpolation error allowed between knots (10x below the 1e-12 m promised)
 LIMIT_TOLERANCE = 1e-12      # m: an interpolated stroke beyond the travel by less than this is accepted
@@ -44,67 +52,33 @@ COMMAND_FREQUENCY = 1e9      # Hz: velocity/acceleration bounds of a command: th
 # Evaluating tables
 
 def sample_table(table: StrokeTable, times: np.ndarray) -> np.ndarray:
-    """(3, n, channels) s (m), ṡ (m/s), s̈ (m/s²) of ``table`` at ``times`` (s), right-continuous.
-
-    Every channel at once (a loop over channels cost the actuator ~0.5 ms per channel and window: a
-    64-actuator stream could not keep up)."""
-    times = np.asarray(times, dtype=float)
-    c, tau, inside = _segments(table, times)
-    powers = tau[..., None] ** np.arange(N_POLY)
-    poly = c[..., :N_POLY]
-    i = np.arange(1, N_POLY)
-    s = np.sum(poly * powers, axis=-1)
-    sd = np.sum(poly[..., 1:] * i * powers[..., :-1], axis=-1)
-    sdd = np.sum(poly[..., 2:] * (i[1:] * i[:-1]) * powers[..., :-2], axis=-1)
-    w = c[..., COEF_OMEGA]
-    cw, sw = np.cos(w * tau), np.sin(w * tau)
-    trig = c[..., COEF_COS] * cw + c[..., COEF_SIN] * sw
-    s = s + trig
-    sd = sd + w * (c[..., COEF_SIN] * cw - c[..., COEF_COS] * sw)
-    sdd = sdd - w * w * trig
-    held = np.where(times[None, :] < table.start[:, None], table.before[:, None], table.after[:, None])
-    out = np.stack([np.where(inside, s, held), np.where(inside, sd, 0.0), np.where(inside, sdd, 0.0)])
-    return out.transpose(0, 2, 1)
-
-
-def _segments(table: StrokeTable, times: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(segment rows (channels, n, N_COEF), τ within the segment (s), inside mask) at ``times``."""
-    rel = times[None, :] - table.start[:, None]
-    period, count = table.period[:, None], table.count[:, None]
-    inside = (rel >= 0.0) & (rel < count * period)
-    j = np.clip(np.floor(rel / period), 0, count - 1)
-    tau = rel - j * period
-    i = np.empty(tau.shape, dtype=np.int64)
-    for k in range(table.n_channels):      # one search per channel (rows hold n_seg[k] + 1 bounds)
-        i[k] = np.searchsorted(table.seg_start[k, :table.n_seg[k] + 1], tau[k], side='right') - 1
-    i = np.clip(i, 0, table.n_seg[:, None] - 1)
-    rows = np.arange(table.n_channels)[:, None]
-    return table.seg_coef[rows, i], tau - table.seg_start[rows, i], inside
-
-
-def _sixth_derivative_bound(table: StrokeTable, times: np.ndarray) -> np.ndarray:
-    """R(t) = max over channels of |C, S|·ω⁶ of the segment active at each of ``times`` (m/s⁶)."""
-    c, _, inside = _segments(table, times)
-    r = np.hypot(c[..., COEF_COS], c[..., COEF_SIN]) * c[..., COEF_OMEGA] ** 6
-    return np.max(np.where(inside, r, 0.0), axis=0, initial=0.0)
+    """(3, n, channels) s (m), ṡ (m/s), s̈ (m/s²) of ``table`` at ``times`` (s), right-continuous, as the
+    kernel evaluates them (compiled: the numpy form, gathering every channel's segment rows, cost the
+    actuator most of a core under a 64-actuator stream)."""
+    times = np.ascontiguousarray(times, dtype=float)
+    out = np.empty((3, times.size, table.n_channels))
+    sample_into(table.as_tuple(), times, out)
+    return out
 
 
 # ----------------------------------------------------------------------------------------------------
 # Knots of the analytic schedule
 
 def breakpoints(table: StrokeTable, t_from: float, t_to: float) -> np.ndarray:
-    """Sorted segment boundaries (s) of every channel within [t_from, t_to], as the kernel computes them."""
-    out = []
-    for k in range(table.n_channels):
-        period, count, n = float(table.period[k]), int(table.count[k]), int(table.n_seg[k])
-        first = max(0, math.floor((t_from - table.start[k]) / period) - 1)
-        last = min(count - 1, math.ceil((t_to - table.start[k]) / period) + 1)
-        if last < first:
-            continue
-        j = np.arange(first, last + 1)[:, None]
-        b = (table.start[k] + j * period + table.seg_start[k, :n + 1][None, :]).ravel()
-        out.append(b[(b >= t_from) & (b <= t_to)])
-    return np.unique(np.concatenate(out)) if out else np.zeros(0)
+    """Sorted segment boundaries (s) of every channel within [t_from, t_to], as the kernel computes them
+    (every channel at once: a loop over channels cost the actuator ~8 µs per channel and window)."""
+    first = np.maximum(0, np.floor((t_from - table.start) / table.period) - 1)
+    last = np.minimum(table.count - 1, np.ceil((t_to - table.start) / table.period) + 1)
+    periods = np.maximum(last - first + 1, 0).astype(np.int64)        # periods of each channel to look at
+    if periods.max(initial=0) == 0:
+        return np.zeros(0)
+    rank = np.arange(periods.max())
+    j = first[:, None] + rank[None, :]                                 # (channels, periods)
+    i = np.arange(table.seg_start.shape[1])
+    b = table.start[:, None, None] + j[:, :, None] * table.period[:, None, None] + table.seg_start[:, None, :]
+    wanted = ((rank[None, :] < periods[:, None])[:, :, None] & (i[None, None, :] <= table.n_seg[:, None, None])
+              & (b >= t_from) & (b <= t_to))
+    return np.unique(b[wanted])
 
 
 def table_knots(table: StrokeTable, t_from: float, t_to: float, tolerance: float = KNOT_TOLERANCE,
@@ -118,7 +92,8 @@ def table_knots(table: StrokeTable, t_from: float, t_to: float, tolerance: float
     ns = np.unique(ns[(ns >= ns_from) & (ns <= ns_to)])
     gaps = np.diff(ns)
     mid = (ns[:-1] + gaps / 2.0) * 1e-9
-    r = _sixth_derivative_bound(table, mid)
+    r = np.empty(mid.size)
+    sixth_derivative_bound(table.as_tuple(), mid, r)
     with np.errstate(divide='ignore'):
         h_ns = np.where(r > 0, 2.0 * (720.0 * tolerance / np.where(r > 0, r, 1.0)) ** (1 / 6) * 1e9, np.inf)
     h_ns = np.minimum(h_ns, max_spacing * 1e9)
@@ -212,6 +187,28 @@ _POWER_TO_BERNSTEIN = np.array([[math.comb(j, i) / math.comb(N_POLY - 1, i) if i
                                  for j in range(N_POLY)] for i in range(N_POLY)])
 
 
+@jit
+def _bernstein_bounds(seg_coef: np.ndarray, seg_start: np.ndarray, n_seg: np.ndarray,
+                      power_to_bernstein: np.ndarray, low: np.ndarray, high: np.ndarray) -> None:
+    """``low``/``high`` (actuators, segments): the range of each segment polynomial's Bernstein
+    coefficients on u = τ/ℓ ∈ [0, 1] (ℓ its length), which bounds the polynomial there; ±inf (empty)
+    for the padding segments past ``n_seg``. Compiled: numpy's row-wise min/max over 6 coefficients cost
+    ~1 ms for a 5 ms window of 64 actuators."""
+    for k in range(seg_coef.shape[0]):
+        for i in range(seg_coef.shape[1]):
+            lo, hi = math.inf, -math.inf
+            if i < n_seg[k]:
+                length = seg_start[k, i + 1] - seg_start[k, i]
+                for j in range(N_POLY):
+                    b = 0.0
+                    scale = 1.0
+                    for m in range(j + 1):
+                        b += power_to_bernstein[m, j] * seg_coef[k, i, m] * scale
+                        scale *= length
+                    lo, hi = min(lo, b), max(hi, b)
+            low[k, i], high[k, i] = lo, hi
+
+
 def table_range(table: StrokeTable, within: tuple[float, float] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(min, max) per channel of the stroke of a Hermite trajectory table (no trigonometric terms) over
     all time: its segments' extrema and the held values before and after.
@@ -222,18 +219,15 @@ def table_range(table: StrokeTable, within: tuple[float, float] | None = None) -
     all a limit check needs (and skips the companion-matrix eigenvalues of almost every segment of a
     stroke well inside the travel).
     """
-    coef = table.seg_coef[:, :, :N_POLY]
-    n_act, n_seg = coef.shape[:2]
-    length = np.diff(table.seg_start, axis=1)[:, :n_seg].reshape(-1)
-    coef = coef.reshape(-1, N_POLY)
-    bernstein = (coef * length[:, None] ** np.arange(N_POLY)) @ _POWER_TO_BERNSTEIN
-    low, high = bernstein.min(axis=1), bernstein.max(axis=1)
-    exact = np.ones(low.size, dtype=bool) if within is None else (low < within[0]) | (high > within[1])
+    n_act, n_seg = table.seg_coef.shape[:2]
+    low, high = np.empty((n_act, n_seg)), np.empty((n_act, n_seg))
+    _bernstein_bounds(table.seg_coef, table.seg_start, table.n_seg, _POWER_TO_BERNSTEIN, low, high)
+    valid = np.arange(n_seg)[None, :] < table.n_seg[:, None]
+    exact = valid if within is None else (low < within[0]) | (high > within[1])
     if exact.any():
-        low[exact], high[exact] = _polynomial_extrema(coef[exact], length[exact])
-    valid = (np.arange(n_seg)[None, :] < table.n_seg[:, None]).reshape(-1)
-    low = np.where(valid, low, np.inf).reshape(n_act, n_seg).min(axis=1)
-    high = np.where(valid, high, -np.inf).reshape(n_act, n_seg).max(axis=1)
+        length = np.diff(table.seg_start, axis=1)[:, :n_seg]
+        low[exact], high[exact] = _polynomial_extrema(table.seg_coef[exact][:, :N_POLY], length[exact])
+    low, high = low.min(axis=1), high.max(axis=1)
     return np.minimum(low, np.minimum(table.before, table.after)), np.maximum(high, np.maximum(table.before,
                                                                                                  table.after))
 
