@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 import struct
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from builtin_interfaces.msg import Duration, Time
@@ -58,12 +58,69 @@ def tilt_quaternion(theta: float) -> tuple[float, float, float, float]:
     return 0.0, math.sin(-theta / 2.0), 0.0, math.cos(-theta / 2.0)
 
 
-class StateMessages:
-    """The state messages published every tick, allocated once and updated in place.
+STAMP_SENTINEL = (1589706734, 987654321)        # sec, nanosec: a stamp no real message carries
 
-    Building five messages per tick (nested Header/Time/Point... constructors) was a third of the
-    simulator's Python time at 1 kHz; rclpy serialises a message inside ``publish``, so reusing the same
-    objects is safe.
+
+def _sentinel(i: int) -> float:
+    """The i-th placeholder float64: a large finite value whose bytes occur nowhere else in a template."""
+    return struct.unpack('<d', struct.pack('<Q', 0x7FE1_2345_6789_A000 + i))[0]
+
+
+class SerializedTemplate:
+    """A message serialized once, whose header stamp and float64 fields are then rewritten in place in its
+    CDR bytes: what the simulator publishes every tick (``Publisher.publish(bytes)``).
+
+    Building the rclpy message and letting ``publish`` convert and serialize it cost ~3x more than
+    patching bytes; the subscribers receive the same CDR. ``msg``: the message with every constant field
+    set; ``stamp``: its Time to patch; ``runs``: setters that each put a list of placeholder values into
+    fields laid out contiguously in CDR (e.g. a Pose's 7 doubles, a JointState's positions), with their
+    lengths. The placeholders are located in the serialized template, so no offset is computed by hand.
+    """
+
+    def __init__(self, msg: object, stamp: Time, runs: Sequence[tuple[Callable[[list[float]], None], int]]):
+        from rclpy.serialization import serialize_message
+
+        stamp.sec, stamp.nanosec = STAMP_SENTINEL
+        first = 0
+        for setter, length in runs:
+            setter([_sentinel(first + i) for i in range(length)])
+            first += length
+        template = serialize_message(msg)
+        self._buffer = bytearray(template)
+        self._stamp_at = _offset(template, struct.pack('<iI', *STAMP_SENTINEL))
+        self._runs: list[tuple[int, struct.Struct]] = []
+        first = 0
+        for _, length in runs:
+            at = _offset(template, struct.pack(f'<{length}d', *(_sentinel(first + i) for i in range(length))))
+            self._runs.append((at, struct.Struct(f'<{length}d')))
+            first += length
+
+    def serialize(self, sec: int, nanosec: int, *runs: Sequence[float]) -> bytes:
+        """The CDR bytes with the stamp (sec, nanosec) and each run's values (as many as in the template)."""
+        buffer = self._buffer
+        struct.pack_into('<iI', buffer, self._stamp_at, sec, nanosec)
+        for (at, layout), values in zip(self._runs, runs, strict=True):
+            layout.pack_into(buffer, at, *values)
+        return bytes(buffer)
+
+
+def _offset(template: bytes, pattern: bytes) -> int:
+    at = template.find(pattern)
+    if at < 0 or template.find(pattern, at + 1) >= 0:
+        raise ValueError('SerializedTemplate: a placeholder is not laid out contiguously, or not once')
+    return at
+
+
+def _setter(*targets: tuple[object, str]) -> Callable[[list[float]], None]:
+    """A run setter writing values one by one into the (object, attribute) ``targets``."""
+    def put(values: list[float]) -> None:
+        for (obj, attr), value in zip(targets, values, strict=True):
+            setattr(obj, attr, value)
+    return put
+
+
+class StateMessages:
+    """The serialized state messages published every tick (bytes, from :class:`SerializedTemplate`).
 
     * ``pose``: the part's position (x, 0, z) (m) in ``feeder`` with the contact-frame tilt as orientation;
     * ``twist``: its velocity (ẋ, 0, ż) (m/s) in ``feeder``; angular velocity 0 (a point mass);
@@ -74,31 +131,42 @@ class StateMessages:
     """
 
     def __init__(self, joint_names: Sequence[str]):
-        self.pose = PoseStamped(header=Header(frame_id=FEEDER_FRAME))
-        self.twist = TwistStamped(header=Header(frame_id=FEEDER_FRAME))
-        self.wrench = WrenchStamped(header=Header(frame_id=CONTACT_FRAME))
-        self.joints = JointState(header=Header(frame_id=FEEDER_FRAME), name=list(joint_names))
-        self.clock = Clock()
-        self._stamps = [m.header.stamp for m in (self.pose, self.twist, self.wrench, self.joints)]
-        self._stamps.append(self.clock.clock)
+        pose = PoseStamped(header=Header(frame_id=FEEDER_FRAME))
+        p, q = pose.pose.position, pose.pose.orientation
+        self._pose = SerializedTemplate(pose, pose.header.stamp,
+                                        [(_setter((p, 'x'), (p, 'y'), (p, 'z'), (q, 'x'), (q, 'y'), (q, 'z'),
+                                                  (q, 'w')), 7)])
+        twist = TwistStamped(header=Header(frame_id=FEEDER_FRAME))
+        self._twist = SerializedTemplate(twist, twist.header.stamp, [(_vector_setter(twist.twist), 6)])
+        wrench = WrenchStamped(header=Header(frame_id=CONTACT_FRAME))
+        self._wrench = SerializedTemplate(wrench, wrench.header.stamp, [(_vector_setter(wrench.wrench), 6)])
+        joints = JointState(header=Header(frame_id=FEEDER_FRAME), name=list(joint_names))
+        n = len(joint_names)
+        self._joints = SerializedTemplate(joints, joints.header.stamp,
+                                          [(lambda v: setattr(joints, 'position', v), n),
+                                           (lambda v: setattr(joints, 'velocity', v), n)])
+        clock = Clock()
+        self._clock = SerializedTemplate(clock, clock.clock, [])
+        self.stamp = Time()
+        self.pose = self.twist = self.wrench = self.joints = self.clock = b''
 
     def update(self, obs: Observation, stroke_velocities: np.ndarray) -> Time:
-        """Fill every message from ``obs`` at its sim time; returns that time as a ROS Time."""
+        """Serialize every message from ``obs`` at its sim time; returns that time as a ROS Time."""
         ns = round(obs.t * 1e9)
         sec, nanosec = ns // 1_000_000_000, ns % 1_000_000_000
-        for stamp in self._stamps:
-            stamp.sec, stamp.nanosec = sec, nanosec
-        position = self.pose.pose.position
-        position.x, position.z = obs.x, obs.z
-        q = self.pose.pose.orientation
-        q.x, q.y, q.z, q.w = tilt_quaternion(obs.theta)
-        linear = self.twist.twist.linear
-        linear.x, linear.z = obs.xdot, obs.zdot
-        force = self.wrench.wrench.force
-        force.x, force.z = obs.friction, obs.normal_load
-        self.joints.position = obs.strokes.tolist()
-        self.joints.velocity = np.asarray(stroke_velocities, dtype=float).tolist()
-        return self.clock.clock
+        self.pose = self._pose.serialize(sec, nanosec, (obs.x, 0.0, obs.z, *tilt_quaternion(obs.theta)))
+        self.twist = self._twist.serialize(sec, nanosec, (obs.xdot, 0.0, obs.zdot, 0.0, 0.0, 0.0))
+        self.wrench = self._wrench.serialize(sec, nanosec, (obs.friction, 0.0, obs.normal_load, 0.0, 0.0, 0.0))
+        self.joints = self._joints.serialize(sec, nanosec, obs.strokes, stroke_velocities)
+        self.clock = self._clock.serialize(sec, nanosec)
+        self.stamp = Time(sec=sec, nanosec=nanosec)
+        return self.stamp
+
+
+def _vector_setter(pair: object) -> Callable[[list[float]], None]:
+    """Setter of a Twist's (linear, angular) or a Wrench's (force, torque) six doubles."""
+    first, second = (pair.linear, pair.angular) if hasattr(pair, 'linear') else (pair.force, pair.torque)
+    return _setter(*((v, axis) for v in (first, second) for axis in 'xyz'))
 
 
 class SurfaceMarkers:

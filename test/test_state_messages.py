@@ -1,0 +1,48 @@
+"""The simulator's per-tick state messages are patched CDR templates (nodes/messages.py): what a subscriber
+deserializes must be exactly the observation, tick after tick, for any number of joints."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
+from rclpy.serialization import deserialize_message
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+
+from micro_feeder.nodes.messages import StateMessages, seconds, tilt_quaternion
+from micro_feeder.physics.dynamics import FeederModel
+
+
+@pytest.mark.parametrize('n_actuators', [1, 3, 64])
+def test_serialized_state_equals_the_observation(n_actuators):
+    centers = tuple(1e-3 * k for k in range(n_actuators))
+    model = FeederModel()
+    model = model.replace(surface=model.surface.replace(centers=centers, widths=(1e-3,) * n_actuators),
+                          stroke=model.stroke.replace(phases=tuple(k / n_actuators for k in range(n_actuators))))
+    names = [f'joint_{k}' for k in range(n_actuators)]
+    state_messages = StateMessages(names)
+    state = model.initial_state()
+    rng = np.random.default_rng(n_actuators)
+    for t in (1e-4, 3.3e-4, 7e-4, 1.2e-3, 2.000000001):
+        model.advance(state, t)
+        obs = model.observe(state)
+        velocities = rng.normal(size=n_actuators)
+        stamp = state_messages.update(obs, velocities)
+        assert seconds(stamp) == pytest.approx(t, abs=1e-9)
+        pose = deserialize_message(state_messages.pose, PoseStamped)
+        twist = deserialize_message(state_messages.twist, TwistStamped)
+        wrench = deserialize_message(state_messages.wrench, WrenchStamped)
+        joints = deserialize_message(state_messages.joints, JointState)
+        clock = deserialize_message(state_messages.clock, Clock)
+        for header in (pose.header, twist.header, wrench.header, joints.header):
+            assert (header.stamp.sec, header.stamp.nanosec) == (stamp.sec, stamp.nanosec)
+        assert (clock.clock.sec, clock.clock.nanosec) == (stamp.sec, stamp.nanosec)
+        assert (pose.header.frame_id, wrench.header.frame_id) == ('feeder', 'contact')
+        q = pose.pose.orientation
+        assert (pose.pose.position.x, pose.pose.position.y, pose.pose.position.z) == (obs.x, 0.0, obs.z)
+        assert (q.x, q.y, q.z, q.w) == tilt_quaternion(obs.theta)
+        assert (twist.twist.linear.x, twist.twist.linear.z, twist.twist.angular.y) == (obs.xdot, obs.zdot, 0.0)
+        assert (wrench.wrench.force.x, wrench.wrench.force.z) == (obs.friction, obs.normal_load)
+        assert list(joints.name) == names and list(joints.effort) == []
+        assert list(joints.position) == list(obs.strokes) and list(joints.velocity) == list(velocities)
