@@ -7,11 +7,11 @@ joint_trajectory_controller) runs through them reproduces the schedule within 1e
 holds the strokes where they are. With ``auto_start`` the burst is sent once, as soon as a subscriber
 (the simulator) is connected. ``stroke.*`` may be changed at any time and apply to the next start.
 
-A burst that fits in one message of ``stream.max_points`` knots goes out whole, stamped 0 ("start on
-receipt"; ``stroke.delay`` is in the knot times): it needs nothing from the simulator, so it works in
-lockstep too. A longer burst, or ``stroke.count`` 0 (strokes until ``~/stop``), is **streamed**: the node
-follows sim time on ``actuator/joint_states`` and keeps ``stream.lead`` seconds of the waveform
-scheduled ahead of it, in windows of at most ``stream.window`` s and ``stream.max_points`` knots, each
+A burst that fits in one message (``stream.max_points`` knots, at most :data:`MESSAGE_BYTES`) goes out
+whole, stamped 0 ("start on receipt"; ``stroke.delay`` is in the knot times): it needs nothing from the
+simulator, so it works in lockstep too. A longer burst, or ``stroke.count`` 0 (strokes until ``~/stop``),
+is **streamed**: the node follows sim time on ``actuator/joint_states`` and keeps ``stream.lead`` seconds
+of the waveform scheduled ahead of it, in windows of at most ``stream.window`` s and one message's knots, each
 stamped at its start in sim time (replace-from-start semantics: a window takes over exactly where the
 previous one is, at a knot both share). Message size, memory and work per window are bounded whatever the
 burst's length.
@@ -53,10 +53,11 @@ NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
                                    le=10000), 0),
     'stream.max_points': (ParamSpec('knots per trajectory message at most; a longer burst is streamed in '
                                     'windows', kind='int', ge=16, le=100000), 2000),
-    'stream.window': (ParamSpec('sim time one streamed message covers at most', 's', gt=0, le=10.0), 0.005),
+    'stream.window': (ParamSpec('sim time one streamed message covers at most', 's', gt=0, le=10.0), 0.02),
     'stream.lead': (ParamSpec('a streamed burst is kept scheduled this far ahead of sim time', 's', gt=0, le=10.0),
                     0.2),
 }
+MESSAGE_BYTES = 256 * 1024     # a trajectory message's knots take at most this many bytes (whatever the joints)
 COUNT_SPEC = ParamSpec('number of strokes in the burst; 0 = strokes until ~/stop (streamed)', kind='int', ge=0)
 
 
@@ -65,6 +66,13 @@ def sample_waveform(params: StrokeParams, n_actuators: int, knots_per_stroke: in
     """Knots of the whole burst: times (s from its start, whole ns) and (n, actuators) s (m), ṡ (m/s),
     s̈ (m/s²), at least ``knots_per_stroke`` per stroke period (see :func:`waveform_knots`)."""
     return waveform_knots(params, n_actuators, min_knots_per_stroke=knots_per_stroke)
+
+
+def points_per_message(max_points: int, n_actuators: int) -> int:
+    """Knots in one trajectory message: ``max_points``, fewer when that many would exceed
+    :data:`MESSAGE_BYTES` (64 actuators: 169 knots), so that a message stays far below the simulator's
+    ``max_command_bytes`` (1 MiB) however many joints it carries."""
+    return max(2, min(max_points, MESSAGE_BYTES // trajectory_cdr.point_bytes(n_actuators)))
 
 
 class StrokeStream:
@@ -81,7 +89,7 @@ class StrokeStream:
         self.sent_ns = 0                                   # burst time up to which knots were sent
         self.end_ns = burst_end_ns(dataclasses.replace(params, count=count)) if count else None
         self._window_ns = max(round(window * 1e9), 1)
-        self._max_points = max_points
+        self._max_points = points_per_message(max_points, n_actuators)
         self._max_spacing = max_spacing(params, knots_per_stroke)
 
     @property
@@ -99,8 +107,9 @@ class StrokeStream:
         stop = start + self._window_ns if self.end_ns is None else min(start + self._window_ns, self.end_ns)
         table = waveform_table(self._strokes_through(stop), self.n_actuators)
         ns, values = table_knots(table, start * 1e-9, stop * 1e-9, max_spacing=self._max_spacing)
-        if ns.size > self._max_points:
+        if ns.size > self._max_points:       # cut at a message's knots; later windows are made that long
             ns, values = ns[:self._max_points], values[:, :self._max_points]
+            self._window_ns = max(int(ns[-1]) - start, 1)
         self.sent_ns = int(ns[-1])
         return self.origin_ns + start, ns - start, values
 
@@ -157,7 +166,7 @@ class Actuator(Node):
         n = len(params.phases)
         if count:
             times, pos, vel, acc = sample_waveform(params, n, self.get_parameter('knots_per_stroke').value)
-            if times.size <= self.get_parameter('stream.max_points').value:
+            if times.size <= points_per_message(self.get_parameter('stream.max_points').value, n):
                 self._pub.publish(trajectory_cdr.encode(joint_names(n), np.round(times * 1e9), pos, vel, acc,
                                                           Time()))
                 return f'burst sent: {times.size} knots on {n} joints, {times[-1]:.6g} s'

@@ -29,6 +29,11 @@ def _record(n: int) -> np.dtype:
                      ('n_effort', '<u4'), ('sec', '<i4'), ('nanosec', '<u4')])
 
 
+def point_bytes(n_joints: int) -> int:
+    """Serialized size (bytes) of one knot with positions, velocities and accelerations of ``n_joints``."""
+    return _record(n_joints).itemsize
+
+
 def _align(buf: bytearray) -> None:
     buf += b'\0' * (-len(buf) % 4)
 
