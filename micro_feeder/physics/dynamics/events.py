@@ -118,7 +118,7 @@ def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0:
     (compared at δ = min(1e-3, event_tolerance / h) inside each end; at the start, when ``start_known``,
     the previous step's end tells, ``start_down0/1``). Its minimum is then searched (:func:`brent_dip`)
     to the event tolerance, stopping at the first point past the event. Guarantee, under the assumption
-    that a margin has at most one local minimum within one step (docs/events.md): a dip longer than the
+    that a margin has at most one local extremum within one step (docs/events.md): a dip longer than the
     event tolerance is found, whatever the step size.
     """
     tol = model.event_tolerance / h
@@ -149,48 +149,48 @@ def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0:
     return (best if best <= 1.0 else -1.0), b0, b1
 
 
-@jit
+@jit_inline
 def brent_dip(which: int, strict: bool, mode: int, direction: int, t: float, h: float, y0: np.ndarray,
               f0: np.ndarray, y1: np.ndarray, f1: np.ndarray, model: KernelModel, src: tuple, cur: np.ndarray,
               st: np.ndarray, aux: np.ndarray, work: np.ndarray, dense: bool, tol: float) -> float:
     """Brent's minimisation (parabolic steps, golden-section fallback) of margin ``which`` over the step
     (fractions 0..1) to ``tol``, returning the first fraction found past the event, or -1 when the
-    minimum stays short of it."""
+    minimum stays short of it. (One evaluation site, the first point included: it is inlined.)"""
     golden = 0.3819660112501051
     a, b = 0.0, 1.0
-    x = w = v = golden
-    fx = margins_at(x, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux, work, dense)[which]
-    if crossed(fx, strict):
-        return x
-    fw = fv = fx
+    x = w = v = u = golden
+    fx = fw = fv = 0.0
     d = e = 0.0
-    for _ in range(100):
-        xm = 0.5 * (a + b)
-        if abs(x - xm) <= 2.0 * tol - 0.5 * (b - a):
-            break
-        parabolic = False
-        if abs(e) > tol:
-            r = (x - w) * (fx - fv)
-            q = (x - v) * (fx - fw)
-            p = (x - v) * q - (x - w) * r
-            q = 2.0 * (q - r)
-            if q > 0.0:
-                p = -p
-            q = abs(q)
-            if abs(p) < abs(0.5 * q * e) and q * (a - x) < p < q * (b - x):
-                e = d
-                d = p / q
-                parabolic = True
-                if (x + d) - a < 2.0 * tol or b - (x + d) < 2.0 * tol:
-                    d = tol if xm >= x else -tol
-        if not parabolic:
-            e = (a - x) if x >= xm else (b - x)
-            d = golden * e
-        u = x + d if abs(d) >= tol else x + (tol if d > 0.0 else -tol)
+    for it in range(100):
+        if it > 0:
+            xm = 0.5 * (a + b)
+            if abs(x - xm) <= 2.0 * tol - 0.5 * (b - a):
+                break
+            parabolic = False
+            if abs(e) > tol:
+                r = (x - w) * (fx - fv)
+                q = (x - v) * (fx - fw)
+                p = (x - v) * q - (x - w) * r
+                q = 2.0 * (q - r)
+                if q > 0.0:
+                    p = -p
+                q = abs(q)
+                if abs(p) < abs(0.5 * q * e) and q * (a - x) < p < q * (b - x):
+                    e = d
+                    d = p / q
+                    parabolic = True
+                    if (x + d) - a < 2.0 * tol or b - (x + d) < 2.0 * tol:
+                        d = tol if xm >= x else -tol
+            if not parabolic:
+                e = (a - x) if x >= xm else (b - x)
+                d = golden * e
+            u = x + d if abs(d) >= tol else x + (tol if d > 0.0 else -tol)
         fu = margins_at(u, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux, work, dense)[which]
         if crossed(fu, strict):
             return u
-        if fu <= fx:
+        if it == 0:
+            fx = fw = fv = fu
+        elif fu <= fx:
             if u >= x:
                 a = x
             else:

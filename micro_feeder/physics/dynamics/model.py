@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import partial
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -59,6 +60,11 @@ class Event(NamedTuple):
     from_mode: str
     to_mode: str
     x: float
+
+
+# Builds an Event from a tuple in C: half the cost of calling Event(...) (a Python-level __new__) for the
+# thousands of events a simulated second can hold.
+_new_event = partial(tuple.__new__, Event)
 
 
 @dataclass(frozen=True)
@@ -426,9 +432,9 @@ class FeederModel:
                                                 packed, src, ev_i, ev_f, rec, 0, scratch, st, aux, cur)
                 if n_ev:
                     kinds, olds, news = ev_i[:n_ev].T.tolist()
-                    events.extend(map(Event, ev_f[:n_ev, 0].tolist(), [EVENT_KINDS[i] for i in kinds],
-                                      [MODES[i] for i in olds], [MODES[i] for i in news],
-                                      ev_f[:n_ev, 1].tolist()))
+                    events.extend(map(_new_event, zip(ev_f[:n_ev, 0].tolist(), map(EVENT_KINDS.__getitem__, kinds),
+                                                      map(MODES.__getitem__, olds), map(MODES.__getitem__, news),
+                                                      ev_f[:n_ev, 1].tolist(), strict=True)))
                 if record and n_rec:
                     recorded.append(rec[:n_rec].copy())
                 if status in (layout.NON_FINITE, layout.EVENT_NOT_LOCATED, layout.CHATTER):
