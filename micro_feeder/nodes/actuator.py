@@ -2,7 +2,7 @@
 
 ``~/start`` sends the configured burst on ``actuator/trajectory``: knots with positions, velocities and
 accelerations of the analytic waveform, placed so that the quintic interpolation the simulator (and
-joint_trajectory_controller) runs through them reproduces the schedule within 1e-13 m at every instant
+joint_trajectory_controller) runs through them reproduces the schedule within 5e-13 m at every instant
 (:mod:`micro_feeder.physics.trajectory`). ``~/stop`` stops: the stream ends and an empty trajectory
 holds the strokes where they are. With ``auto_start`` the burst is sent once, as soon as a subscriber
 (the simulator) is connected. ``stroke.*`` may be changed at any time and apply to the next start.
@@ -49,7 +49,7 @@ NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
     'auto_start': (ParamSpec('send the burst once when a subscriber is connected', kind='bool', read_only=True),
                    True),
     'knots_per_stroke': (ParamSpec('minimum trajectory knots per stroke period (0: none); the waveform gets '
-                                   'more where it needs them to be followed within 1e-13 m', kind='int', ge=0,
+                                   'more where it needs them to be followed within 5e-13 m', kind='int', ge=0,
                                    le=10000), 0),
     'stream.max_points': (ParamSpec('knots per trajectory message at most; a longer burst is streamed in '
                                     'windows', kind='int', ge=16, le=100000), 2000),

@@ -42,7 +42,7 @@ from .waveforms import (
     waveform_table,
 )
 
-KNOT_TOLERANCE = 1e-13       # m: interpolation error allowed between knots (10x below the 1e-12 m promised)
+KNOT_TOLERANCE = 5e-13       # m: interpolation error allowed between knots (half the 1e-12 m promised)
 LIMIT_TOLERANCE = 1e-12      # m: an interpolated stroke beyond the travel by less than this is accepted
 BRACKET_NS = 0.25            # ns: a breakpoint's knots keep at least this much from it (float safety)
 COMMAND_FREQUENCY = 1e9      # Hz: velocity/acceleration bounds of a command: the travel crossed at this rate
