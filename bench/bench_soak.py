@@ -9,7 +9,8 @@ every case M minutes, ``--cases 1,16`` picks cases) it reports, each with its ta
   minute's tenth): < 1 MB/min;
 * CPU of the simulator process (% of one core): <= 25 / 35 / 50 % for 1 / 16 / 64 actuators; the
   actuator's CPU is reported beside it;
-* stream underruns (actuator), rejected commands (simulator): 0.
+* stream underruns (actuator), rejected commands (simulator): 0; warnings in the nodes' logs (written to
+  ``out/soak/``, or ``$SOAK_LOG_DIR``). A node that exits during a case stops the benchmark with its log's path.
 
 The travelling wave uses phases (k mod 4)/4: 4 distinct stroke starts per period, whatever the count.
 Prints the load average before and after: on a shared 2-core machine the figures move with it.
@@ -42,6 +43,7 @@ from micro_feeder.nodes._ros import topic_qos
 CLK_TCK = os.sysconf('SC_CLK_TCK')
 CASES = {1: (10.0, 25.0), 16: (10.0, 35.0), 64: (2.0, 50.0)}     # actuators: (minutes, CPU target %)
 BIN = Path(sys.executable).parent
+LOG_DIR = Path(os.environ.get('SOAK_LOG_DIR', 'out/soak'))     # the nodes' logs, one file per case and node
 
 
 def cpu_seconds(pid: int) -> float:
@@ -72,10 +74,12 @@ def slope_per_minute(t: list[float], y: list[float]) -> float:
 
 def run_case(n: int, minutes: float, cpu_target: float) -> dict:
     common = feeder_args(n)
-    sim = subprocess.Popen([str(BIN / 'simulator'), '--ros-args', *common], stdout=subprocess.DEVNULL,
-                           stderr=subprocess.PIPE, text=True)
+    # logs go to files: a pipe nobody reads blocks a process once ~64 KiB of warnings are waiting in it
+    logs = {name: (LOG_DIR / f'soak_{n}_{name}.log').open('w') for name in ('simulator', 'actuator')}
+    sim = subprocess.Popen([str(BIN / 'simulator'), '--ros-args', *common], stdout=logs['simulator'],
+                           stderr=subprocess.STDOUT)
     act = subprocess.Popen([str(BIN / 'actuator'), '--ros-args', *common, '-p', 'stroke.count:=0'],
-                           stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+                           stdout=logs['actuator'], stderr=subprocess.STDOUT)
     context = rclpy.Context()
     rclpy.init(context=context)
     node = rclpy.create_node('bench_soak', context=context)
@@ -106,6 +110,10 @@ def run_case(n: int, minutes: float, cpu_target: float) -> dict:
         end = start + minutes * 60.0
         next_sample = start
         while (now := time.monotonic()) < end:
+            for name, proc in (('simulator', sim), ('actuator', act)):
+                if proc.poll() is not None:
+                    raise RuntimeError(f'the {name} exited ({proc.returncode}) {now - start:.0f} s into the run; '
+                                       f'its log: {LOG_DIR / f"soak_{n}_{name}.log"}')
             if now >= next_sample:
                 samples.append((now - start, cpu_seconds(sim.pid), cpu_seconds(act.pid), rss_mb(sim.pid),
                                 rss_mb(act.pid)))
@@ -128,6 +136,8 @@ def run_case(n: int, minutes: float, cpu_target: float) -> dict:
                 proc.wait(timeout=20)
             except subprocess.TimeoutExpired:
                 proc.kill()
+        for log in logs.values():
+            log.close()
     s = np.asarray(samples)
     wall = s[-1, 0] - s[0, 0]
     warm = s[:, 0] >= min(6.0, wall / 10)          # RSS settles once the first windows are out
@@ -141,7 +151,13 @@ def run_case(n: int, minutes: float, cpu_target: float) -> dict:
         'underruns': latest.get('actuator', {}).get('stream_underruns', '?'),
         'windows': latest.get('actuator', {}).get('windows_sent', '?'),
         'rejected': latest.get('simulator', {}).get('rejected_commands', '?'),
+        'warnings': {name: warnings_in(LOG_DIR / f'soak_{n}_{name}.log') for name in ('simulator', 'actuator')},
     }
+
+
+def warnings_in(log: Path) -> int:
+    """Lines at WARN level or above in a node's log."""
+    return sum(line.startswith(('[WARN]', '[ERROR]', '[FATAL]')) for line in log.read_text().splitlines())
 
 
 def ok(good: bool) -> str:
@@ -151,7 +167,8 @@ def ok(good: bool) -> str:
 def report(r: dict) -> str:
     return '\n'.join([
         f"{r['actuators']} actuator(s), {r['minutes']:.2f} min of continuous strokes "
-        f"({r['windows']} windows, {r['underruns']} underruns, {r['rejected']} rejected)",
+        f"({r['windows']} windows, {r['underruns']} underruns, {r['rejected']} rejected; warnings logged: "
+        f"simulator {r['warnings']['simulator']}, actuator {r['warnings']['actuator']}, in {LOG_DIR})",
         f"  real-time factor median {r['rtf_median']:.4f} (min {r['rtf_min']:.4f})   target >= 0.99  "
         f"{ok(r['rtf_median'] >= 0.99)}",
         f"  simulator CPU {r['sim_cpu_pct']:.1f} % of a core   target <= {r['cpu_target']:g} %  "
@@ -167,6 +184,7 @@ def main() -> None:
     parser.add_argument('--minutes', type=float, help='minutes per case (default: 10 / 10 / 2)')
     parser.add_argument('--cases', default='1,16,64', help='actuator counts to run (of 1, 16, 64)')
     args = parser.parse_args()
+    LOG_DIR.mkdir(parents=True, exist_ok=True)
     print(f'load average before: {os.getloadavg()}')
     for n in (int(c) for c in args.cases.split(',')):
         minutes, cpu_target = CASES[n]
