@@ -98,13 +98,11 @@ class StrokeTable:
                 self.seg_coef, self.n_seg)
 
     def evaluate(self, t: float) -> np.ndarray:
-        """(3, n_channels) array of s (m), ṡ (m/s), s̈ (m/s²) at time ``t`` (right-continuous)."""
-        out = np.empty((3, self.n_channels))
-        src = self.as_tuple()
-        for k in range(self.n_channels):
-            j, i = locate_segment(src, k, t)
-            out[:, k] = channel_value(src, k, j, i, t)
-        return out
+        """(3, n_channels) array of s (m), ṡ (m/s), s̈ (m/s²) at time ``t`` (right-continuous); one compiled
+        call for every channel (a Python loop over 64 channels cost ~0.2 ms per streamed window)."""
+        out = np.empty((3, 1, self.n_channels))
+        sample_into(self.as_tuple(), np.array([float(t)]), out)
+        return out[:, 0, :]
 
     def end_time(self) -> float:
         """Time after which every channel holds its final value."""
