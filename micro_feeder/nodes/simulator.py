@@ -27,7 +27,7 @@ import struct
 import sys
 import threading
 import time
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -317,7 +317,7 @@ class Simulator(Node):
         self.get_logger().error(f'simulation stopped (paused; call ~/reset): {error}')
         self._publish_diagnostics()
 
-    def _publish_state(self, events: list[Event]) -> None:
+    def _publish_state(self, events: Sequence[Event]) -> None:
         self.states_published += 1
         obs = self._stepper.observe()
         state = self._state_messages

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from ..physics.contact import ContactModel, ContactParams
-from ..physics.dynamics import Event, FeederModel, Observation
+from ..physics.dynamics import EventList, FeederModel, Observation
 from ..physics.particle import ParticleParams
 from ..physics.trajectory import CommandLimits, check_table
 from ..physics.waveforms import StrokeSchedule, StrokeTable, trajectory_table
@@ -77,7 +77,7 @@ class Stepper:
         """Stroke travel (m) accepted in commands: the piezo limits."""
         return self.model.piezo.stroke_min, self.model.piezo.stroke_max
 
-    def advance(self, t_target: float) -> list[Event]:
+    def advance(self, t_target: float) -> EventList:
         """Integrate to ``t_target`` (s); returns the mode changes. Raises ``SimulationError``."""
         return self.model.advance(self.state, t_target, self.schedule)
 

@@ -3,8 +3,9 @@
 See :mod:`.model` for the API; :mod:`.kernel` is the compiled engine.
 """
 
-from .model import EVENT_KINDS, MODES, Event, FeederModel, FeederState, Observation, RunResult, SimulationError
+from .event_list import EVENT_KINDS, MODES, Event, EventList
+from .model import FeederModel, FeederState, Observation, RunResult, SimulationError
 from .params import DetachParams, IntegrationParams, LandingParams
 
-__all__ = ['EVENT_KINDS', 'MODES', 'DetachParams', 'Event', 'FeederModel', 'FeederState', 'IntegrationParams',
-           'LandingParams', 'Observation', 'RunResult', 'SimulationError']
+__all__ = ['EVENT_KINDS', 'MODES', 'DetachParams', 'Event', 'EventList', 'FeederModel', 'FeederState',
+           'IntegrationParams', 'LandingParams', 'Observation', 'RunResult', 'SimulationError']

@@ -5,7 +5,7 @@ Typical use (the simulator node calls ``advance`` every tick)::
     model = FeederModel.from_settings(flat)              # immutable; builds the contact tables once
     state = model.initial_state()                        # mutable (t = 0, stuck at particle.x0)
     source = StrokeSchedule(model.waveform())            # or a hold, then commanded trajectories
-    events = model.advance(state, t_target, source)      # -> [Event(...)], state now at t_target
+    events = model.advance(state, t_target, source)      # -> EventList of Event, state now at t_target
     obs = model.observe(state, source)                   # pose, twist, wrench, mode at state.t
     source.command_trajectory(t_cmd, knot_times, positions, velocities, accelerations)
 
@@ -22,8 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from functools import partial
-from typing import Any, NamedTuple
+from typing import Any
 
 import numpy as np
 
@@ -34,10 +33,9 @@ from ..surface import SurfaceParams
 from ..waveforms import StrokeParams, StrokeSchedule, StrokeTable, stack_tables, waveform_table
 from . import kernel as k
 from . import layout
+from .event_list import MODES, EventList
 from .params import DetachParams, IntegrationParams, LandingParams
 
-MODES = ('stuck', 'sliding', 'flying')
-EVENT_KINDS = ('stick_to_slip', 'slip_to_stick', 'take_off', 'landing', 'reversal')
 COUNTER_NAMES = ('stick_to_slip', 'slip_to_stick', 'take_off', 'landing')
 
 
@@ -46,25 +44,6 @@ class SimulationError(RuntimeError):
 
     The message names the time, the mode and the state; ``state`` is left at the last good point.
     """
-
-
-class Event(NamedTuple):
-    """One mode change (or slide reversal), at sim time ``t`` (s) and position ``x`` (m).
-
-    A named tuple: thousands are created per simulated second, and a frozen dataclass costs ~2 us each,
-    as much as integrating the stroke they describe.
-    """
-
-    t: float
-    kind: str
-    from_mode: str
-    to_mode: str
-    x: float
-
-
-# Builds an Event from a tuple in C: half the cost of calling Event(...) (a Python-level __new__) for the
-# thousands of events a simulated second can hold.
-_new_event = partial(tuple.__new__, Event)
 
 
 @dataclass(frozen=True)
@@ -185,7 +164,7 @@ class RunResult:
 
     columns: tuple[str, ...]
     data: np.ndarray
-    events: list[Event]
+    events: EventList
     state: FeederState
 
     def __getitem__(self, name: str) -> np.ndarray:
@@ -302,8 +281,9 @@ class FeederModel:
         return state
 
     def advance(self, state: FeederState, t_target: float,
-                source: StrokeTable | StrokeSchedule | None = None) -> list[Event]:
-        """Integrate ``state`` in place to ``t_target`` (s) and return the mode changes on the way.
+                source: StrokeTable | StrokeSchedule | None = None) -> EventList:
+        """Integrate ``state`` in place to ``t_target`` (s) and return the mode changes on the way
+        (a sequence of :class:`Event`, kept as arrays until read).
 
         ``source``: the stroke command (a table or a :class:`StrokeSchedule`; default the analytic
         waveform). Work is split at the schedule's switch times. Raises :class:`SimulationError`
@@ -313,7 +293,7 @@ class FeederModel:
         return events
 
     def settle(self, state: FeederState, source: StrokeTable | StrokeSchedule | None = None,
-               max_time: float | None = None, step: float | None = None) -> list[Event]:
+               max_time: float | None = None, step: float | None = None) -> EventList:
         """Integrate ``state`` on until the part is stuck again (at rest once the strokes have ended),
         for at most ``max_time`` (s, default ``integration.settle_max``) more, in pieces of ``step`` (s,
         default ``integration.settling_time`` or 1 ms); returns the events. Whether it settled:
@@ -330,31 +310,31 @@ class FeederModel:
         state = self.initial_state() if state is None else state
         t_end = state.t + (self.default_duration() if duration is None else duration)
         rows = [self._observe_row(state, source)[0]]
-        events: list[Event] = []
+        events: list[EventList] = []
         stops = [t_end] if output_step is None else \
             [*np.arange(state.t + output_step, t_end, output_step).tolist(), t_end]
         for t_stop in stops:
             chunk_events, recorded = self._integrate(state, t_stop, source, record=True)
-            events += chunk_events
+            events.append(chunk_events)
             rows += recorded
         if duration is None:
             chunk_events, recorded = self._settle(state, source, None, output_step, record=True)
-            events += chunk_events
+            events.append(chunk_events)
             rows += recorded
-        return RunResult(self.columns(), np.vstack(rows), events, state)
+        return RunResult(self.columns(), np.vstack(rows), EventList.concatenate(events), state)
 
     def _settle(self, state: FeederState, source: StrokeTable | StrokeSchedule | None, max_time: float | None,
-                step: float | None, record: bool) -> tuple[list[Event], list[np.ndarray]]:
+                step: float | None, record: bool) -> tuple[EventList, list[np.ndarray]]:
         max_time = self.integration.settle_max if max_time is None else max_time
         step = step or self.integration.settling_time or 1e-3
         t_cap = state.t + max_time
-        events: list[Event] = []
+        events: list[EventList] = []
         rows: list[np.ndarray] = []
         while state.mode != 'stuck' and state.t < t_cap:
             chunk_events, recorded = self._integrate(state, min(state.t + step, t_cap), source, record)
-            events += chunk_events
+            events.append(chunk_events)
             rows += recorded
-        return events, rows
+        return EventList.concatenate(events), rows
 
     def columns(self) -> tuple[str, ...]:
         """Names of the recorded columns (then ``stroke_k`` per actuator)."""
@@ -410,12 +390,12 @@ class FeederModel:
 
     def _integrate(self, state: FeederState, t_target: float,
                    source: StrokeTable | StrokeSchedule | None, record: bool
-                   ) -> tuple[list[Event], list[np.ndarray]]:
+                   ) -> tuple[EventList, list[np.ndarray]]:
         packed = self._kernel_model._replace(record=record)
         ev_i = np.zeros((1024, 3), dtype=np.int64)
         ev_f = np.zeros((1024, 2))
         rec = np.zeros((4096 if record else 2, layout.N_FIXED_COLUMNS + self.n_actuators))
-        events: list[Event] = []
+        events: list[EventList] = []
         recorded: list[np.ndarray] = []
         scratch = np.zeros((layout.N_SCRATCH, state.y.size))
         aux = np.zeros(layout.N_AUX)
@@ -431,15 +411,12 @@ class FeederModel:
                 status, n_ev, n_rec = k.advance(state.y, state.iv, state.fs, state.ahead, t_until, t_limit,
                                                 packed, src, ev_i, ev_f, rec, 0, scratch, st, aux, cur)
                 if n_ev:
-                    kinds, olds, news = ev_i[:n_ev].T.tolist()
-                    events.extend(map(_new_event, zip(ev_f[:n_ev, 0].tolist(), map(EVENT_KINDS.__getitem__, kinds),
-                                                      map(MODES.__getitem__, olds), map(MODES.__getitem__, news),
-                                                      ev_f[:n_ev, 1].tolist(), strict=True)))
+                    events.append(EventList(ev_i[:n_ev].copy(), ev_f[:n_ev].copy()))
                 if record and n_rec:
                     recorded.append(rec[:n_rec].copy())
                 if status in (layout.NON_FINITE, layout.EVENT_NOT_LOCATED, layout.CHATTER):
                     raise SimulationError(self._failure(status, state))
-        return events, recorded
+        return EventList.concatenate(events), recorded
 
     def _failure(self, status: int, state: FeederState) -> str:
         what = {layout.NON_FINITE: 'the state or the contact load became non-finite',
