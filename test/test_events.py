@@ -160,3 +160,18 @@ def test_chunking_gives_one_answer(changes: dict) -> None:
     for other in (ticks, chunks, output):
         assert other.transitions == whole.transitions
         assert other.distance == pytest.approx(whole.distance, abs=1e-9, rel=1e-6)
+
+
+@pytest.mark.parametrize('coefficients', [(1.0, -0.9, 0.6, 0.2), (-0.5, -2.0, 1.0, 2.0), (0.0, -1.0, 3.0, 0.0),
+                                          (1.0, -0.01, 0.0, 0.02), (0.0, -1.0, 4.0, -1.0)])
+def test_dip_search_starts_at_the_minimum_of_the_cubic_through_the_end_values_and_slopes(coefficients) -> None:
+    """dip_seed against numpy's roots of the cubic's derivative: for a margin that is a cubic in the step
+    fraction, the search's first point is its minimum."""
+    from micro_feeder.physics.dynamics.events import dip_seed
+    cubic = np.polynomial.Polynomial(coefficients)
+    slope = cubic.deriv()
+    rising = [r.real for r in slope.roots()
+              if abs(r.imag) < 1e-12 and 0 < r.real < 1 and cubic.deriv(2)(r.real) > 0]
+    assert len(rising) == 1 and slope(0.0) < 0.0 < slope(1.0)
+    seed = dip_seed(cubic(0.0), cubic(1.0), slope(0.0), slope(1.0), 1e-6)
+    assert seed == pytest.approx(rising[0], abs=1e-12)

@@ -109,17 +109,18 @@ def crossed(value: float, strict: bool) -> bool:
 @jit_inline
 def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0: np.ndarray, y1: np.ndarray,
               f1: np.ndarray, g0: float, g1: float, e0: float, e1: float, fresh: bool, start_known: bool,
-              start_down0: bool, start_down1: bool, model: KernelModel, src: tuple, cur: np.ndarray, st: np.ndarray,
-              aux: np.ndarray, work: np.ndarray, dense: bool) -> tuple[float, float, float]:
+              start_slope0: float, start_slope1: float, model: KernelModel, src: tuple, cur: np.ndarray,
+              st: np.ndarray, aux: np.ndarray, work: np.ndarray, dense: bool) -> tuple[float, float, float]:
     """Step fraction of a point where a margin, positive at both ends of the step, dips past its event
-    inside it (-1 if there is none), and both margins just before the step's end.
+    inside it (-1 if there is none), and both margins' slopes (per second) at the step's end.
 
     A margin with an interior minimum decreases just after the start and increases just before the end
-    (compared at δ = min(1e-3, event_tolerance / h) inside each end; at the start, when ``start_known``,
-    the previous step's end tells, ``start_down0/1``). Its minimum is then searched (:func:`brent_dip`)
-    to the event tolerance, stopping at the first point past the event. Guarantee, under the assumption
-    that a margin has at most one local extremum within one step (docs/events.md): a dip longer than the
-    event tolerance is found, whatever the step size.
+    (slopes from differences over δ = min(1e-3, event_tolerance / h) of the step inside each end; at the
+    start, when ``start_known``, the previous step's end slopes ``start_slope0/1``). Its minimum is then
+    searched (:func:`brent_dip`, from the minimum of the margin's cubic model on those values and slopes) to
+    the event tolerance, stopping at the first point past the event. Guarantee, under the assumption that a
+    margin has at most one local extremum within one step (docs/events.md): a dip longer than the event
+    tolerance is found, whatever the step size.
     """
     tol = model.event_tolerance / h
     if tol >= 0.25:
@@ -129,36 +130,58 @@ def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0:
                         dense)
     if not start_known:
         a0, a1 = margins_at(delta, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux, work, dense)
-        start_down0, start_down1 = a0 < g0, a1 < g1
+        start_slope0, start_slope1 = (a0 - g0) / (delta * h), (a1 - g1) / (delta * h)
+    end_slope0, end_slope1 = (e0 - b0) / (delta * h), (e1 - b1) / (delta * h)
     best = 2.0
     for which in range(2):
         start, end = (g0, e0) if which == 0 else (g1, e1)
-        near_end, down = (b0, start_down0) if which == 0 else (b1, start_down1)
+        near_end, start_slope, end_slope = (b0, start_slope0, end_slope0) if which == 0 else \
+            (b1, start_slope1, end_slope1)
         if not (math.isfinite(start) and math.isfinite(end)) or (which == 0 and fresh):
             continue
         strict = mode == STUCK and which == 0
         if crossed(near_end, strict):
             theta = 1.0 - delta
-        elif down and near_end < end:
-            theta = brent_dip(which, strict, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux,
-                              work, dense, tol)
+        elif start_slope < 0.0 and end_slope > 0.0:
+            seed = dip_seed(start, end, start_slope * h, end_slope * h, tol)
+            theta = brent_dip(which, strict, seed, start, end, mode, direction, t, h, y0, f0, y1, f1, model, src,
+                              cur, st, aux, work, dense, tol)
         else:
             continue
         if 0.0 < theta < best:
             best = theta
-    return (best if best <= 1.0 else -1.0), b0, b1
+    return (best if best <= 1.0 else -1.0), end_slope0, end_slope1
 
 
 @jit_inline
-def brent_dip(which: int, strict: bool, mode: int, direction: int, t: float, h: float, y0: np.ndarray,
+def dip_seed(g0: float, g1: float, d0: float, d1: float, tol: float) -> float:
+    """Where the cubic Hermite model of a margin has its minimum (values g0, g1 at the step's ends, slopes
+    d0 < 0 < d1 per step fraction: its derivative, a quadratic, has one root in (0, 1) where it rises),
+    kept within [2 tol, 1 - 2 tol]; the golden section point if that cannot be computed."""
+    qa = 6.0 * (g0 - g1) + 3.0 * (d0 + d1)          # p'(θ) = qa θ² + qb θ + d0
+    qb = 6.0 * (g1 - g0) - 4.0 * d0 - 2.0 * d1
+    disc = qb * qb - 4.0 * qa * d0
+    theta = 0.3819660112501051
+    if disc >= 0.0:                                  # the rising root, without cancellation
+        theta = (-qb + math.sqrt(disc)) / (2.0 * qa) if qb < 0.0 else 2.0 * d0 / (-qb - math.sqrt(disc))
+    if not math.isfinite(theta):
+        theta = 0.3819660112501051
+    return min(max(theta, 2.0 * tol), 1.0 - 2.0 * tol)
+
+
+@jit_inline
+def brent_dip(which: int, strict: bool, seed: float, g_start: float, g_end: float, mode: int, direction: int,
+              t: float, h: float, y0: np.ndarray,
               f0: np.ndarray, y1: np.ndarray, f1: np.ndarray, model: KernelModel, src: tuple, cur: np.ndarray,
               st: np.ndarray, aux: np.ndarray, work: np.ndarray, dense: bool, tol: float) -> float:
     """Brent's minimisation (parabolic steps, golden-section fallback) of margin ``which`` over the step
     (fractions 0..1) to ``tol``, returning the first fraction found past the event, or -1 when the
-    minimum stays short of it. (One evaluation site, the first point included: it is inlined.)"""
+    minimum stays short of it. It starts at ``seed``, with the step's ends (margins ``g_start``,
+    ``g_end``) as the other points of its first parabola. (One evaluation site, the first point
+    included: it is inlined.)"""
     golden = 0.3819660112501051
     a, b = 0.0, 1.0
-    x = w = v = u = golden
+    x = w = v = u = seed
     fx = fw = fv = 0.0
     d = e = 0.0
     for it in range(100):
@@ -188,8 +211,8 @@ def brent_dip(which: int, strict: bool, mode: int, direction: int, t: float, h: 
         fu = margins_at(u, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux, work, dense)[which]
         if crossed(fu, strict):
             return u
-        if it == 0:
-            fx = fw = fv = fu
+        if it == 0:                         # the ends are the other two points of the first parabola
+            fx, w, fw, v, fv, d, e = fu, 1.0, g_end, 0.0, g_start, 1.0, 1.0
         elif fu <= fx:
             if u >= x:
                 a = x

@@ -47,6 +47,8 @@ from .layout import (
     FS_AHEAD_T1,
     FS_H,
     FS_MAX_SPEED,
+    FS_START_SLOPE0,
+    FS_START_SLOPE1,
     FS_T,
     FS_T_ENTRY,
     IV_AHEAD_GRAZING,
@@ -54,8 +56,6 @@ from .layout import (
     IV_DIR,
     IV_FRESH,
     IV_MODE,
-    IV_START_DOWN0,
-    IV_START_DOWN1,
     IV_START_KNOWN,
     N_FIXED_COLUMNS,
     NON_FINITE,
@@ -107,15 +107,15 @@ def observe(t: float, y: np.ndarray, iv: np.ndarray, model: KernelModel, src: tu
 
 
 @jit
-def keep_ahead(t0: float, t1: float, y0: np.ndarray, y1: np.ndarray, which: int, grazing: bool, down0: bool,
-               down1: bool, start_known: bool, ahead: np.ndarray, iv: np.ndarray, fs: np.ndarray) -> None:
+def keep_ahead(t0: float, t1: float, y0: np.ndarray, y1: np.ndarray, which: int, grazing: bool, slope0: float,
+               slope1: float, start_known: bool, ahead: np.ndarray, iv: np.ndarray, fs: np.ndarray) -> None:
     """Keep the step (t0, y0) -> (t1, y1), taken past the target, for the next call: with the event it
     ends on (``which`` >= 0) or else what the dip search knows where the following step starts."""
     copy_into(ahead[0], y0)
     copy_into(ahead[1], y1)
     fs[FS_AHEAD_T0], fs[FS_AHEAD_T1] = t0, t1
     iv[IV_AHEAD_WHICH], iv[IV_AHEAD_GRAZING] = which, grazing
-    iv[IV_START_KNOWN], iv[IV_START_DOWN0], iv[IV_START_DOWN1] = start_known, down0, down1
+    iv[IV_START_KNOWN], fs[FS_START_SLOPE0], fs[FS_START_SLOPE1] = start_known, slope0, slope1
 
 
 @jit
@@ -202,7 +202,7 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
     h_cap = 0.0
     h_wave = math.inf
     dip_retries = 0
-    start_known, start_down0, start_down1 = iv[IV_START_KNOWN] != 0, iv[IV_START_DOWN0] != 0, iv[IV_START_DOWN1] != 0
+    start_known, start_slope0, start_slope1 = iv[IV_START_KNOWN] != 0, fs[FS_START_SLOPE0], fs[FS_START_SLOPE1]
     while t < t_target:
         if n_ev + 2 > ev_i.shape[0]:
             status = EVENTS_FULL
@@ -268,11 +268,11 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
             # stuck stays stuck while |T_req| <= Q_max; a fresh mode's margin starts at 0 by construction
             hit0 = (e0 < 0.0 and g0 >= 0.0) if mode == STUCK else (e0 <= 0.0 and (g0 > 0.0 or fresh))
             hit1 = e1 <= 0.0 and g1 > 0.0
-            near_end0 = near_end1 = math.nan
+            end_slope0 = end_slope1 = math.nan
             if not (hit0 or hit1) and dip_search and dip_retries < 4:
-                theta, near_end0, near_end1 = first_dip(
-                    mode, direction, t, h, y, f0, y1, f1, g0, g1, e0, e1, fresh, start_known, start_down0,
-                    start_down1, model, src, cur, st, aux, work, error_control)
+                theta, end_slope0, end_slope1 = first_dip(
+                    mode, direction, t, h, y, f0, y1, f1, g0, g1, e0, e1, fresh, start_known, start_slope0,
+                    start_slope1, model, src, cur, st, aux, work, error_control)
                 if theta > 0.0:                 # a margin dips past its event inside the step: end the
                     h_cap = theta * h           # step there (the retried step then locates the root)
                     dip_retries += 1
@@ -280,8 +280,8 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
             if not (hit0 or hit1):              # accept the step
                 t_new = t_next if h == t_next - t else (t_limit if h == t_limit - t else t + h)
                 if t_new > t_target:            # past the target: keep it and report at the target
-                    keep_ahead(t, t_new, y, y1, -1, False, near_end0 > e0, near_end1 > e1,
-                               t_new < t_next and not math.isnan(near_end0), ahead, iv, fs)
+                    keep_ahead(t, t_new, y, y1, -1, False, end_slope0, end_slope1,
+                               t_new < t_next and not math.isnan(end_slope0), ahead, iv, fs)
                     n_rec = report_at(t_target, t, y, iv, model, src, cur, st, aux, scratch, rec, n_rec)
                     t = t_target
                     break
@@ -291,15 +291,15 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
                 g0, g1 = e0, e1
                 iv[IV_FRESH] = 0
                 dip_retries = 0
-                # is each margin decreasing where the next step starts? (its slope at this step's end)
-                start_down0, start_down1 = near_end0 > e0, near_end1 > e1
+                # each margin's slope where the next step starts (at this step's end)
+                start_slope0, start_slope1 = end_slope0, end_slope1
                 fs[FS_MAX_SPEED] = max(fs[FS_MAX_SPEED], abs(y[1]))
                 if record:
                     observe(t, y, iv, model, src, cur, st, aux, work[10], rec[n_rec])
                     n_rec += 1
                 need_eval = t >= t_next or (threshold and mode != FLYING)
-                start_known = not need_eval and not math.isnan(near_end0)
-                iv[IV_START_KNOWN], iv[IV_START_DOWN0], iv[IV_START_DOWN1] = start_known, start_down0, start_down1
+                start_known = not need_eval and not math.isnan(end_slope0)
+                iv[IV_START_KNOWN], fs[FS_START_SLOPE0], fs[FS_START_SLOPE1] = start_known, start_slope0, start_slope1
                 continue
             theta = 2.0
             if hit0:
@@ -338,7 +338,7 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
             t_new = t + theta * h
             grazing = t_new - fs[FS_T_ENTRY] < tol
             if t_new > t_target:                # the event lies past the target: keep it for later
-                keep_ahead(t, t_new, y, y1, which, grazing, False, False, False, ahead, iv, fs)
+                keep_ahead(t, t_new, y, y1, which, grazing, math.nan, math.nan, False, ahead, iv, fs)
                 n_rec = report_at(t_target, t, y, iv, model, src, cur, st, aux, scratch, rec, n_rec)
                 t = t_target
                 break

@@ -64,18 +64,18 @@ class KernelModel(NamedTuple):
 # iv: discrete state. IV_ENTRY_COUNTER: the counter incremented when the current mode was entered (-1
 # none), IV_PREV_MODE: the mode before it; both serve "a mode that ends within the event tolerance of
 # its start is treated as not entered".
-# IV_AHEAD_*: the step taken past the last target (see ``advance``); IV_START_*: what the dip search
-# knows about the margins' slopes where the next step starts.
+# IV_AHEAD_*: the step taken past the last target (see ``advance``); IV_START_KNOWN: the dip search
+# knows the margins' slopes where the next step starts (FS_START_SLOPE*).
 (IV_MODE, IV_DIR, IV_FRESH, IV_STICK_TO_SLIP, IV_SLIP_TO_STICK, IV_TAKE_OFF, IV_LANDING,
- IV_ENTRY_COUNTER, IV_PREV_MODE, IV_AHEAD_WHICH, IV_AHEAD_GRAZING, IV_START_KNOWN, IV_START_DOWN0,
- IV_START_DOWN1) = range(14)
-N_IV = 14
+ IV_ENTRY_COUNTER, IV_PREV_MODE, IV_AHEAD_WHICH, IV_AHEAD_GRAZING, IV_START_KNOWN) = range(12)
+N_IV = 12
 COUNTERS = (IV_STICK_TO_SLIP, IV_SLIP_TO_STICK, IV_TAKE_OFF, IV_LANDING)
 
 # fs: continuous bookkeeping (FS_H: the adaptive step size to try next; FS_AHEAD_T0/T1: start and end of
-# the step taken past the last target, T1 NaN when there is none)
-FS_T, FS_T_ENTRY, FS_MAX_SPEED, FS_H, FS_AHEAD_T0, FS_AHEAD_T1 = range(6)
-N_FS = 6
+# the step taken past the last target, T1 NaN when there is none; FS_START_SLOPE0/1: the margins' slopes
+# (per second) where the next step starts, when IV_START_KNOWN)
+FS_T, FS_T_ENTRY, FS_MAX_SPEED, FS_H, FS_AHEAD_T0, FS_AHEAD_T1, FS_START_SLOPE0, FS_START_SLOPE1 = range(8)
+N_FS = 8
 N_SCRATCH = 11
 
 # aux: quantities of the last evaluation
