@@ -54,8 +54,18 @@ def surface_at(x: float, s: np.ndarray, sd: np.ndarray, sdd: np.ndarray, centers
 
     Only the first ``centers.size`` entries of the stroke arrays are read, and only those of actuators
     with |x − c_k| ≤ w_k·u_cut (``SurfaceParams.cutoff_radius``; ``math.inf`` for the exact full sum).
+    (:func:`surface_jet` without its rates: s̈ stands in for s⃛, and the compiler drops the sums unused.)
     """
-    h = hx = hxx = ht = htt = hxt = 0.0
+    return surface_jet(x, s, sd, sdd, sdd, centers, widths, u_cut)[:6]
+
+
+@jit_inline
+def surface_jet(x: float, s: np.ndarray, sd: np.ndarray, sdd: np.ndarray, sddd: np.ndarray, centers: np.ndarray,
+                widths: np.ndarray, u_cut: float) -> tuple[float, float, float, float, float, float, float, float,
+                                                           float, float]:
+    """:func:`surface_at`'s six values, then h_ttt, h_ttx, h_xxt, h_xxx: the rates that the margins' time
+    derivatives need (s⃛ in m/s³); the third derivative of the bump is −(u³ − 3u)/w³ · g."""
+    h = hx = hxx = ht = htt = hxt = httt = httx = hxxt = hxxx = 0.0
     for k in range(centers.size):
         w = widths[k]
         u = (x - centers[k]) / w
@@ -64,13 +74,18 @@ def surface_at(x: float, s: np.ndarray, sd: np.ndarray, sdd: np.ndarray, centers
         g = math.exp(-0.5 * u * u)
         g1 = -u / w * g
         g2 = (u * u - 1.0) / (w * w) * g
+        g3 = -u * (u * u - 3.0) / (w * w * w) * g
         h += s[k] * g
         hx += s[k] * g1
         hxx += s[k] * g2
         ht += sd[k] * g
         htt += sdd[k] * g
         hxt += sd[k] * g1
-    return h, hx, hxx, ht, htt, hxt
+        httt += sddd[k] * g
+        httx += sdd[k] * g1
+        hxxt += sd[k] * g2
+        hxxx += s[k] * g3
+    return h, hx, hxx, ht, htt, hxt, httt, httx, hxxt, hxxx
 
 
 def surface_profile(x: np.ndarray, strokes: np.ndarray, centers: np.ndarray | tuple,

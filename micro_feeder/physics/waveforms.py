@@ -165,28 +165,32 @@ def segment_end(src: tuple, k: int, j: int, i: int) -> float:
 
 
 @jit_inline
-def channel_value(src: tuple, k: int, j: int, i: int, t: float) -> tuple[float, float, float]:
-    """(s, ṡ, s̈) of channel ``k`` at ``t`` evaluated on segment (j, i), which may be extrapolated a
-    little past its end (a step ending on a breakpoint evaluates its last stage from the left side)."""
+def channel_value(src: tuple, k: int, j: int, i: int, t: float) -> tuple[float, float, float, float]:
+    """(s, ṡ, s̈, s⃛) of channel ``k`` at ``t`` evaluated on segment (j, i), which may be extrapolated a
+    little past its end (a step ending on a breakpoint evaluates its last stage from the left side).
+    (Callers that drop s⃛ pay nothing for it: the compiler removes what an inlined caller does not use.)"""
     start, period, _, before, after, seg_start, seg_coef, _ = src
     if j == -1:
-        return before[k], 0.0, 0.0
+        return before[k], 0.0, 0.0, 0.0
     if j == -2:
-        return after[k], 0.0, 0.0
+        return after[k], 0.0, 0.0, 0.0
     tau = t - (start[k] + j * period[k] + seg_start[k, i])
     c = seg_coef[k, i]
     s = c[0] + tau * (c[1] + tau * (c[2] + tau * (c[3] + tau * (c[4] + tau * c[5]))))
     sd = c[1] + tau * (2.0 * c[2] + tau * (3.0 * c[3] + tau * (4.0 * c[4] + tau * 5.0 * c[5])))
     sdd = 2.0 * c[2] + tau * (6.0 * c[3] + tau * (12.0 * c[4] + tau * 20.0 * c[5]))
+    sddd = 6.0 * c[3] + tau * (24.0 * c[4] + tau * 60.0 * c[5])
     w = c[COEF_OMEGA]
     if c[COEF_COS] != 0.0 or c[COEF_SIN] != 0.0:
         cw = math.cos(w * tau)
         sw = math.sin(w * tau)
         trig = c[COEF_COS] * cw + c[COEF_SIN] * sw
+        trig_rate = c[COEF_SIN] * cw - c[COEF_COS] * sw
         s += trig
-        sd += w * (c[COEF_SIN] * cw - c[COEF_COS] * sw)
+        sd += w * trig_rate
         sdd -= w * w * trig
-    return s, sd, sdd
+        sddd -= w * w * w * trig_rate
+    return s, sd, sdd, sddd
 
 
 @jit
@@ -196,7 +200,7 @@ def sample_into(src: tuple, times: np.ndarray, out: np.ndarray) -> None:
     for k in range(out.shape[2]):
         for n in range(times.size):
             j, i = locate_segment(src, k, times[n])
-            out[0, n, k], out[1, n, k], out[2, n, k] = channel_value(src, k, j, i, times[n])
+            out[0, n, k], out[1, n, k], out[2, n, k], _ = channel_value(src, k, j, i, times[n])
 
 
 @jit

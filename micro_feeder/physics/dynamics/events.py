@@ -109,16 +109,18 @@ def crossed(value: float, strict: bool) -> bool:
 @jit_inline
 def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0: np.ndarray, y1: np.ndarray,
               f1: np.ndarray, g0: float, g1: float, e0: float, e1: float, fresh: bool, start_known: bool,
-              start_slope0: float, start_slope1: float, model: KernelModel, src: tuple, cur: np.ndarray,
-              st: np.ndarray, aux: np.ndarray, work: np.ndarray, dense: bool) -> tuple[float, float, float]:
+              start_slope0: float, start_slope1: float, end_slope0: float, end_slope1: float, model: KernelModel,
+              src: tuple, cur: np.ndarray, st: np.ndarray, aux: np.ndarray, work: np.ndarray,
+              dense: bool) -> tuple[float, float, float]:
     """Step fraction of a point where a margin, positive at both ends of the step, dips past its event
     inside it (-1 if there is none), and both margins' slopes (per second) at the step's end.
 
-    A margin with an interior minimum decreases just after the start and increases just before the end
-    (slopes from differences over δ = min(1e-3, event_tolerance / h) of the step inside each end; at the
-    start, when ``start_known``, the previous step's end slopes ``start_slope0/1``). Its minimum is then
-    searched (:func:`brent_dip`, from the minimum of the margin's cubic model on those values and slopes) to
-    the event tolerance, stopping at the first point past the event. Guarantee, under the assumption that a
+    A margin with an interior minimum decreases where the step starts and increases where it ends. The
+    slopes come in closed form (:func:`margin_slopes`: ``start_slope0/1`` when ``start_known``,
+    ``end_slope0/1`` when not NaN), else from differences over δ = min(1e-3, event_tolerance / h) of the
+    step inside each end (in flight, with the piezo model). The minimum is then searched
+    (:func:`brent_dip`, from the minimum of the margin's cubic model on those values and slopes) to the
+    event tolerance, stopping at the first point past the event. Guarantee, under the assumption that a
     margin has at most one local extremum within one step (docs/events.md): a dip longer than the event
     tolerance is found, whatever the step size.
     """
@@ -126,12 +128,14 @@ def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0:
     if tol >= 0.25:
         return -1.0, math.nan, math.nan
     delta = min(1e-3, tol)
-    b0, b1 = margins_at(1.0 - delta, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux, work,
-                        dense)
+    b0 = b1 = math.nan
+    if math.isnan(end_slope0):
+        b0, b1 = margins_at(1.0 - delta, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux, work,
+                            dense)
+        end_slope0, end_slope1 = (e0 - b0) / (delta * h), (e1 - b1) / (delta * h)
     if not start_known:
         a0, a1 = margins_at(delta, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux, work, dense)
         start_slope0, start_slope1 = (a0 - g0) / (delta * h), (a1 - g1) / (delta * h)
-    end_slope0, end_slope1 = (e0 - b0) / (delta * h), (e1 - b1) / (delta * h)
     best = 2.0
     for which in range(2):
         start, end = (g0, e0) if which == 0 else (g1, e1)
@@ -140,7 +144,7 @@ def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0:
         if not (math.isfinite(start) and math.isfinite(end)) or (which == 0 and fresh):
             continue
         strict = mode == STUCK and which == 0
-        if crossed(near_end, strict):
+        if crossed(near_end, strict):           # (NaN, not evaluated, is not crossed)
             theta = 1.0 - delta
         elif start_slope < 0.0 and end_slope > 0.0:
             seed = dip_seed(start, end, start_slope * h, end_slope * h, tol)

@@ -64,7 +64,7 @@ from .layout import (
     STUCK,
     KernelModel,
 )
-from .rhs import copy_into, evaluate, finite, interp, locate_all, strokes_at, wave_step
+from .rhs import copy_into, evaluate, finite, interp, locate_all, margin_slopes, strokes_at, wave_step
 from .steppers import dopri5_dense, dopri5_error, dopri5_step, rk4_step
 
 
@@ -158,7 +158,7 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
     events, rows used). A status other than DONE stops at a consistent state: EVENTS_FULL /
     RECORDS_FULL ask the caller to drain the buffers and call again; NON_FINITE, EVENT_NOT_LOCATED
     and CHATTER are errors (the state is left at the last good step). Work arrays (the kernel never
-    allocates): ``scratch`` (N_SCRATCH, y.size), ``st`` (3, channels), ``aux`` (N_AUX,), ``cur`` (channels, 2)
+    allocates): ``scratch`` (N_SCRATCH, y.size), ``st`` (4, channels), ``aux`` (N_AUX,), ``cur`` (channels, 2)
     int64.
     """
     work = scratch
@@ -229,6 +229,9 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
                     mode = iv[IV_MODE]
             g0, g1 = evaluate(mode, iv[IV_DIR], t, y, model, src, cur, st, aux, f0)
             need_eval = False
+            if dip_search:                      # the margins' slopes where this step starts
+                start_slope0, start_slope1 = margin_slopes(mode, iv[IV_DIR], y, f0, model, st, aux)
+                start_known = not math.isnan(start_slope0)
             if g1 <= 0.0:                       # a condition that already holds switches at once
                 which = 1
             elif iv[IV_FRESH] == 0 and (g0 < 0.0 if mode == STUCK else g0 <= 0.0):
@@ -261,6 +264,9 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
                     fs[FS_H] = h * min(5.0, max(0.2, 0.9 * max(err, 1e-10) ** -0.2))
                     break
                 h *= max(0.2, 0.9 * err ** -0.2)
+            end_slope0 = end_slope1 = math.nan
+            if dip_search:                      # in closed form where it has one (else NaN)
+                end_slope0, end_slope1 = margin_slopes(mode, direction, y1, f1, model, st, aux)
             if not finite(y1) or math.isnan(e0) or math.isnan(e1):
                 status = NON_FINITE
                 break
@@ -268,11 +274,10 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
             # stuck stays stuck while |T_req| <= Q_max; a fresh mode's margin starts at 0 by construction
             hit0 = (e0 < 0.0 and g0 >= 0.0) if mode == STUCK else (e0 <= 0.0 and (g0 > 0.0 or fresh))
             hit1 = e1 <= 0.0 and g1 > 0.0
-            end_slope0 = end_slope1 = math.nan
             if not (hit0 or hit1) and dip_search and dip_retries < 4:
                 theta, end_slope0, end_slope1 = first_dip(
                     mode, direction, t, h, y, f0, y1, f1, g0, g1, e0, e1, fresh, start_known, start_slope0,
-                    start_slope1, model, src, cur, st, aux, work, error_control)
+                    start_slope1, end_slope0, end_slope1, model, src, cur, st, aux, work, error_control)
                 if theta > 0.0:                 # a margin dips past its event inside the step: end the
                     h_cap = theta * h           # step there (the retried step then locates the root)
                     dip_retries += 1

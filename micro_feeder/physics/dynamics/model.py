@@ -375,7 +375,7 @@ class FeederModel:
 
     def _observe_row(self, state: FeederState, source: StrokeTable | StrokeSchedule | None
                      ) -> tuple[np.ndarray, np.ndarray]:
-        """The output row (1, columns) at ``state.t`` and the strokes' s, ṡ, s̈ per channel (3, channels)
+        """The output row (1, columns) at ``state.t`` and the strokes' s, ṡ, s̈, s⃛ per channel (4, channels)
         the kernel evaluated for it."""
         table = source.table_at(state.t) if isinstance(source, StrokeSchedule) else source
         src = self._source_table(table).as_tuple()
@@ -383,7 +383,7 @@ class FeederModel:
         cur = np.zeros((n_ch, 2), dtype=np.int64)
         k.locate_all(src, state.t, cur)
         row = np.zeros((1, layout.N_FIXED_COLUMNS + self.n_actuators))
-        st = np.zeros((3, n_ch))
+        st = np.zeros((4, n_ch))
         k.observe(state.t, state.y, state.iv, self._kernel_model, src, cur, st,
                   np.zeros(layout.N_AUX), np.zeros(state.y.size), row[0])
         return row, st
@@ -401,7 +401,7 @@ class FeederModel:
         aux = np.zeros(layout.N_AUX)
         for t_until, t_limit, table in self._segments(state.t, t_target, source):
             src = self._source_table(table).as_tuple()
-            st = np.zeros((3, src[0].size))
+            st = np.zeros((4, src[0].size))
             cur = np.zeros((src[0].size, 2), dtype=np.int64)
             on = state.ahead_on
             if not (on and on[0] is self and on[1] is table and on[2] == t_limit):

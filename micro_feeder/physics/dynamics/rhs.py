@@ -9,7 +9,7 @@ import numpy as np
 
 from .._jit import jit, jit_inline
 from ..piezo import piezo_acceleration
-from ..surface import surface_at
+from ..surface import surface_at, surface_jet
 from ..waveforms import COEF_OMEGA, channel_value, locate_segment, segment_end
 from .layout import (
     AUX_GAP,
@@ -68,9 +68,9 @@ FLIGHT_REACH = 1.0
 @jit_inline
 def strokes_at(t: float, y: np.ndarray, model: KernelModel, src: tuple, cur: np.ndarray,
                st: np.ndarray, reach: float) -> float:
-    """Fill ``st`` (3, channels) with s, ṡ, s̈ at ``t`` on the segments ``cur``; return the base
+    """Fill ``st`` (4, channels) with s, ṡ, s̈, s⃛ at ``t`` on the segments ``cur``; return the base
     acceleration (m/s², 0 without the test-only base channel). With the piezo model the actuators'
-    s, ṡ come from the state and s̈ from the stack dynamics driven by the commanded stroke.
+    s, ṡ come from the state and s̈ from the stack dynamics driven by the commanded stroke (s⃛ unused).
 
     An actuator farther than ``model.cutoff_radius + reach`` of its widths from x = y[0] reads 0 instead of
     its stroke (``reach`` 0: those ``surface_at`` skips at x; ``inf``: every stroke, as with the piezo model,
@@ -79,12 +79,13 @@ def strokes_at(t: float, y: np.ndarray, model: KernelModel, src: tuple, cur: np.
     radius = math.inf if model.piezo else model.cutoff_radius + reach
     for k in range(st.shape[1]):
         if k < n_act and abs((y[0] - model.centers[k]) / model.widths[k]) > radius:
-            st[0, k] = st[1, k] = st[2, k] = 0.0
+            st[0, k] = st[1, k] = st[2, k] = st[3, k] = 0.0
             continue
-        s, sd, sdd = channel_value(src, k, cur[k, 0], cur[k, 1], t)
+        s, sd, sdd, sddd = channel_value(src, k, cur[k, 0], cur[k, 1], t)
         st[0, k] = s
         st[1, k] = sd
         st[2, k] = sdd
+        st[3, k] = sddd
     if model.piezo:
         for k in range(n_act):
             s = y[4 + 2 * k]
@@ -178,6 +179,50 @@ def evaluate(mode: int, direction: int, t: float, y: np.ndarray, model: KernelMo
     dy[1] = (friction - aux[AUX_T_REQ]) / (m * aux[AUX_L])
     slide_margin = math.inf if model.threshold else direction * y[1]
     return slide_margin, adhesion_margin
+
+
+@jit_inline
+def margin_slopes(mode: int, direction: int, y: np.ndarray, dy: np.ndarray, model: KernelModel, st: np.ndarray,
+                  aux: np.ndarray) -> tuple[float, float]:
+    """Time derivatives (per second) of the two margins :func:`evaluate` just returned at (t, y) along the
+    motion ``dy`` it computed (``st`` and ``aux`` as it left them): stick (or slide) margin, adhesion margin.
+
+    In closed form from the strokes' s⃛ and the bump's derivatives (:func:`surface_jet`): with a = ẍ,
+    v = ẋ (0 when stuck), dN/dt = m (dA/dt · L − A · dL/dt) / L² for A = h_tt + 2 h_xt v + h_xx v² + g − h_x a_b,
+    dL/dt = h_x (h_xt + h_xx v) / L; dT_req/dt = dN/dt h_x + N (h_xt + h_xx v) + m (dL/dt a_b + L da_b/dt);
+    dQ_max/dt = the slope of the Q_max(N) table segment at N times dN/dt; the slide margin's is dir·a. NaN in
+    flight, with the piezo model (the stack's s⃛ is not tracked) and with the threshold friction logic.
+    """
+    if mode == FLYING or model.piezo or model.threshold:
+        return math.nan, math.nan
+    m = model.mass
+    v = y[1] if mode != STUCK else 0.0
+    a = dy[1] if mode != STUCK else 0.0
+    (_h, hx, hxx, _ht, htt, hxt, httt, httx, hxxt,
+     hxxx) = surface_jet(y[0], st[0], st[1], st[2], st[3], model.centers, model.widths, model.cutoff_radius)
+    n_act = model.n_actuators
+    base, base_rate = (st[2, n_act], st[3, n_act]) if model.has_base else (0.0, 0.0)
+    hx_rate = hxt + hxx * v
+    normal_acc = htt + model.gravity - hx * base
+    normal_acc_rate = httt + httx * v - hx_rate * base - hx * base_rate
+    if model.convective:
+        normal_acc += 2.0 * hxt * v + hxx * v * v
+        normal_acc_rate += (2.0 * (httx + hxxt * v) * v + 2.0 * hxt * a + (hxxt + hxxx * v) * v * v
+                            + 2.0 * hxx * v * a)
+    length = math.sqrt(1.0 + hx * hx)
+    length_rate = hx * hx_rate / length
+    n = m * normal_acc / length
+    n_rate = m * (normal_acc_rate - normal_acc * length_rate / length) / length
+    adhesion_rate = n_rate
+    if not model.include_weight:
+        adhesion_rate += m * model.gravity * length_rate / (length * length)
+    if mode != STUCK:
+        return direction * a, adhesion_rate
+    i = min(max(int(aux[AUX_LOAD_INDEX]), 0), model.load_n.size - 2)
+    q_rate = n_rate * (model.q_max_n[i + 1] - model.q_max_n[i]) / (model.load_n[i + 1] - model.load_n[i])
+    t_req = n * hx + m * length * base
+    t_req_rate = n_rate * hx + n * hx_rate + m * (length_rate * base + length * base_rate)
+    return q_rate - (t_req_rate if t_req > 0.0 else -t_req_rate if t_req < 0.0 else abs(t_req_rate)), adhesion_rate
 
 
 @jit
