@@ -16,6 +16,7 @@ from typing import TextIO
 
 from ..physics.parameters import ParameterError
 from ..settings import SettingsError
+from ._compile_notice import announce_kernel_compiles
 
 COMMAND_ORDER = ('run', 'simulate', 'sweep', 'optimize', 'calibrate', 'contact', 'hil', 'info', 'plot', 'export',
                  'recover', 'replay', 'resim')
@@ -58,6 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     command = 'micro-feeder'
     try:
         warnings.showwarning = _show_warning
+        announce_kernel_compiles()
         parser = build_parser()
         args = parser.parse_args(argv)
         command = f'micro-feeder {args.command}'
