@@ -52,7 +52,7 @@ class EventList(Sequence[Event]):
         if len(parts) == 1:
             return parts[0]
         if not parts:
-            return cls()
+            return NO_EVENTS
         return cls(np.concatenate([p._codes for p in parts]), np.concatenate([p._values for p in parts]))
 
     @property
@@ -96,3 +96,6 @@ class EventList(Sequence[Event]):
 
     def __repr__(self) -> str:
         return f'EventList({list(self)!r})'
+
+
+NO_EVENTS = EventList()     # what most calls return (a 1 ms tick rarely holds an event): shared, read-only
