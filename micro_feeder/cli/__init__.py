@@ -14,9 +14,9 @@ import sys
 import warnings
 from typing import TextIO
 
+from ..compile_notice import announce_kernel_compiles
 from ..physics.parameters import ParameterError
 from ..settings import SettingsError
-from ._compile_notice import announce_kernel_compiles
 
 COMMAND_ORDER = ('run', 'simulate', 'sweep', 'optimize', 'calibrate', 'contact', 'hil', 'info', 'plot', 'export',
                  'recover', 'replay', 'resim')
@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     command = 'micro-feeder'
     try:
         warnings.showwarning = _show_warning
-        announce_kernel_compiles()
+        announce_kernel_compiles(lambda line: print(f'micro-feeder: {line}', file=sys.stderr, flush=True))
         parser = build_parser()
         args = parser.parse_args(argv)
         command = f'micro-feeder {args.command}'

@@ -17,9 +17,11 @@ import rclpy
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.context import Context
 from rclpy.experimental import EventsExecutor
+from rclpy.logging import get_logger
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+from ..compile_notice import announce_kernel_compiles
 from ..physics.dynamics import SimulationError
 from ..physics.parameters import ParameterError
 from ._ros import SPIN_SLICE, StopFlag, spin_until
@@ -82,6 +84,7 @@ def spin_node(name: str, factory: Callable[[], Node], args: list[str] | None = N
     stop = init_ros(name, args)
     if stop is None:
         return 2
+    announce_kernel_compiles(get_logger(name).info)
     try:
         node = build_interruptibly(factory, stop)
     except (ParameterError, SimulationError) as err:
