@@ -31,6 +31,12 @@ class KernelCompileNotice(event.Listener):
         pass
 
 
+_registered: list[KernelCompileNotice] = []
+
+
 def announce_kernel_compiles(say: Callable[[str], object]) -> None:
-    """Have ``say`` told, once, when this process starts compiling the physics kernel."""
-    event.register('numba:compile', KernelCompileNotice(say))
+    """Have ``say`` told, once, when this process starts compiling the physics kernel. Idempotent: a process
+    that calls it again (the CLI's ``main`` run several times in one test session) keeps its first listener."""
+    if not _registered:
+        _registered.append(KernelCompileNotice(say))
+        event.register('numba:compile', _registered[0])

@@ -21,3 +21,11 @@ def test_a_physics_compile_is_announced_once() -> None:
         _fresh_function('micro_feeder.physics.probe')(1)
         _fresh_function('micro_feeder.physics.probe')(1.5)
     assert said == [NOTICE]
+
+
+def test_announcing_again_keeps_one_listener() -> None:
+    from micro_feeder.compile_notice import _registered, announce_kernel_compiles
+    announce_kernel_compiles(print)
+    first = list(_registered)
+    announce_kernel_compiles(print)
+    assert _registered == first and len(first) == 1
