@@ -12,3 +12,9 @@ os.environ['ROS_DOMAIN_ID'] = str(random.SystemRandom().randint(1, 100))
 os.environ['ROS_LOG_DIR'] = tempfile.mkdtemp(prefix='micro-feeder-roslog-')
 os.environ.setdefault('MPLBACKEND', 'Agg')
 pytest_plugins = ['ros_helpers']
+
+# The physics kernel compiles once per installation (~2.5 min, docs/dynamics.md §6): here, before any test
+# and outside the per-test timeout, rather than inside whichever test integrates first (~1.5 s once cached).
+from micro_feeder.physics.dynamics import FeederModel  # noqa: E402
+
+FeederModel().run()
