@@ -123,6 +123,13 @@ class StrokeStream:
         return dataclasses.replace(p, count=max(needed, 1))
 
 
+def _encoded_window(stream: StrokeStream) -> bytes:
+    """The stream's next window as a serialized JointTrajectory stamped at its start."""
+    stamp_ns, offsets_ns, knots = stream.next_window()
+    return trajectory_cdr.encode(joint_names(stream.n_actuators), offsets_ns, knots[0], knots[1], knots[2],
+                                 messages.to_time(stamp_ns * 1e-9))
+
+
 class Actuator(Node):
     """Stroke waveform publisher: see the module docstring and docs/interface.md."""
 
@@ -148,6 +155,13 @@ class Actuator(Node):
         self._pending_stream = False                 # streamed start waiting for the first sim time
         self._auto = self.create_timer(0.05, self._auto_start) if self.get_parameter('auto_start').value else None
         self.create_timer(1.0, self._publish_diagnostics)
+        self._warm_up()
+
+    def _warm_up(self) -> None:
+        """Build and encode one window of the configured strokes, unsent: the first call loads the compiled
+        waveform code (0.2-0.7 s), which inside the first streamed window let sim time pass the strokes
+        scheduled (an underrun at every start)."""
+        _encoded_window(self._new_stream(0.0))
 
     # -- the burst ------------------------------------------------------------------------------------
 
@@ -185,14 +199,17 @@ class Actuator(Node):
         self.stops += 1
         return 'stop sent'
 
-    def _start_stream(self, now: float) -> None:
+    def _new_stream(self, origin: float) -> StrokeStream:
+        """A stream of the configured strokes whose time 0 falls at sim time ``origin`` (s)."""
         params, count = self._stroke_params()
-        lead = self.get_parameter('stream.lead').value
+        return StrokeStream(params, count, len(params.phases), round(origin * 1e9),
+                            window=self.get_parameter('stream.window').value,
+                            max_points=self.get_parameter('stream.max_points').value,
+                            knots_per_stroke=self.get_parameter('knots_per_stroke').value)
+
+    def _start_stream(self, now: float) -> None:
         self._pending_stream = False
-        self._stream = StrokeStream(params, count, len(params.phases), round((now + lead) * 1e9),
-                                    window=self.get_parameter('stream.window').value,
-                                    max_points=self.get_parameter('stream.max_points').value,
-                                    knots_per_stroke=self.get_parameter('knots_per_stroke').value)
+        self._stream = self._new_stream(now + self.get_parameter('stream.lead').value)
         self._feed(now)
 
     def _feed(self, now: float) -> None:
@@ -205,9 +222,7 @@ class Actuator(Node):
                                       f'(until {stream.scheduled_until:.6f} s); raise stream.lead',
                                       throttle_duration_sec=5.0)
         while not stream.done and stream.scheduled_until < now + lead:
-            stamp_ns, offsets_ns, knots = stream.next_window()
-            self._pub.publish(trajectory_cdr.encode(joint_names(stream.n_actuators), offsets_ns, knots[0],
-                                                      knots[1], knots[2], messages.to_time(stamp_ns * 1e-9)))
+            self._pub.publish(_encoded_window(stream))
             self.windows += 1
         if stream.done:
             self._stream = None
