@@ -14,6 +14,12 @@ import numba
 
 F = TypeVar('F', bound=Callable)
 
+# Floating-point freedom given to LLVM: only fusing a multiply and an add into one FMA instruction
+# (rounded once instead of twice, so never less accurate). No reassociation, no approximate reciprocals
+# and no assumption of finite values: the kernel detects a NaN state and must see it. Measured on the
+# default scenario, interleaved on an idle machine: 230-250x real time against 208-226x without it.
+FASTMATH = {'contract'}
+
 
 def jit(function: F) -> F:
     """Compile ``function`` with numba in nopython mode, caching the machine code on disk.
@@ -25,9 +31,9 @@ def jit(function: F) -> F:
     unpacking otherwise cost ~100 ns per call, 5-7x the arithmetic (measured in docs/dynamics.md).
     ``nogil=True`` releases the GIL while compiled code runs: the simulator node's loop thread then
     integrates while its executor thread serves commands and services, and a long integration no longer
-    keeps the main thread from answering Ctrl-C/SIGTERM.
+    keeps the main thread from answering Ctrl-C/SIGTERM. ``fastmath``: :data:`FASTMATH`.
     """
-    return numba.njit(cache=True, error_model='numpy', _nrt=False, nogil=True)(function)
+    return numba.njit(cache=True, error_model='numpy', _nrt=False, nogil=True, fastmath=FASTMATH)(function)
 
 
 def jit_inline(function: F) -> F:
@@ -36,4 +42,5 @@ def jit_inline(function: F) -> F:
     Each call otherwise passes the model and stroke-table tuples (dozens of machine words) by value;
     inlining halves the cost of one right-hand-side evaluation (115 -> 53 ns, docs/dynamics.md).
     """
-    return numba.njit(cache=True, error_model='numpy', _nrt=False, nogil=True, inline='always')(function)
+    return numba.njit(cache=True, error_model='numpy', _nrt=False, nogil=True, inline='always',
+                      fastmath=FASTMATH)(function)
