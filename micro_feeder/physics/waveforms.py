@@ -193,6 +193,31 @@ def channel_value(src: tuple, k: int, j: int, i: int, t: float) -> tuple[float, 
     return s, sd, sdd, sddd
 
 
+@jit_inline
+def channel_bounds(src: tuple, k: int, j: int, i: int, t0: float, t1: float) -> tuple[float, float, float]:
+    """Upper bounds of |s| (m), |ṡ| (m/s) and |s̈| (m/s²) of channel ``k`` on segment (j, i) (as
+    :func:`channel_value` evaluates it) for every t in [t0, t1]: each polynomial coefficient's term at the
+    largest |τ| of the range, plus the trigonometric term's amplitude times ω⁰, ω¹, ω²."""
+    start, period, _, before, after, seg_start, seg_coef, _ = src
+    if j < 0:
+        return abs(before[k] if j == -1 else after[k]), 0.0, 0.0
+    origin = start[k] + j * period[k] + seg_start[k, i]
+    tau = max(abs(t0 - origin), abs(t1 - origin))
+    c = seg_coef[k, i]
+    s_max = sd_max = sdd_max = 0.0
+    power = 1.0                                        # tau^n, from n = 0
+    for n in range(6):
+        s_max += abs(c[n]) * power
+        if n + 1 < 6:
+            sd_max += (n + 1) * abs(c[n + 1]) * power
+        if n + 2 < 6:
+            sdd_max += (n + 2) * (n + 1) * abs(c[n + 2]) * power
+        power *= tau
+    amplitude = math.hypot(c[COEF_COS], c[COEF_SIN])
+    w = abs(c[COEF_OMEGA])
+    return s_max + amplitude, sd_max + amplitude * w, sdd_max + amplitude * w * w
+
+
 @jit
 def sample_into(src: tuple, times: np.ndarray, out: np.ndarray) -> None:
     """``out`` (3, times, channels): s (m), ṡ (m/s), s̈ (m/s²) of every channel of ``src`` at ``times`` (s),

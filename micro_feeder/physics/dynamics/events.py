@@ -9,6 +9,7 @@ import numpy as np
 
 from .._jit import jit, jit_inline
 from ..surface import surface_at
+from ..waveforms import channel_bounds
 from .layout import (
     AUX_L,
     AUX_QMAX,
@@ -35,7 +36,7 @@ from .layout import (
     KernelModel,
 )
 from .rhs import contact_load, evaluate, sign, strokes_at
-from .steppers import dopri5_dense, hermite
+from .steppers import dopri5_dense, hermite, interpolant_reach
 
 
 @jit
@@ -147,6 +148,8 @@ def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0:
         if crossed(near_end, strict):           # (NaN, not evaluated, is not crossed)
             theta = 1.0 - delta
         elif start_slope < 0.0 and end_slope > 0.0:
+            if which == 1 and adhesion_floor(mode, t, h, y0, f0, y1, f1, work, dense, model, src, cur) > 0.0:
+                continue                        # the adhesion margin cannot reach 0 in this step
             seed = dip_seed(start, end, start_slope * h, end_slope * h, tol)
             theta = brent_dip(which, strict, seed, start, end, mode, direction, t, h, y0, f0, y1, f1, model, src,
                               cur, st, aux, work, dense, tol)
@@ -155,6 +158,37 @@ def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0:
         if 0.0 < theta < best:
             best = theta
     return (best if best <= 1.0 else -1.0), end_slope0, end_slope1
+
+
+@jit_inline
+def adhesion_floor(mode: int, t: float, h: float, y0: np.ndarray, f0: np.ndarray, y1: np.ndarray, f1: np.ndarray,
+                   work: np.ndarray, dense: bool, model: KernelModel, src: tuple, cur: np.ndarray) -> float:
+    """A lower bound (N) of the adhesion margin over the step's interpolant (as :func:`first_dip` sees it);
+    -inf where none is derived (in flight, with the piezo model or the base channel).
+
+    N = m A / L with L ≥ 1, so N ≥ m min(0, A) (and N − m g / L ≥ m min(0, A − g) for the weight outside
+    N), and A = h_tt + 2 h_xt ẋ + h_xx ẋ² + g ≥ g − Σ S2_k − 2 V Σ S1_k e^(−1/2) / w_k − V² Σ S0_k / w_k²:
+    S0..S2 bound each felt actuator's |s|, |ṡ|, |s̈| over the step (:func:`channel_bounds`), the bump's
+    |g|, |g'| w, |g''| w² are at most 1, e^(−1/2), 1, and V bounds |ẋ| on the interpolant. Felt: within
+    the cutoff of any x the interpolant reaches. A floor above 0 proves that the margin has no dip to find.
+    """
+    if mode == FLYING or model.piezo or model.has_base:
+        return -math.inf
+    reach = interpolant_reach(0, h, y0, f0, y1, f1, work, dense)
+    speed = abs(y0[1]) + interpolant_reach(1, h, y0, f0, y1, f1, work, dense) if model.convective else 0.0
+    htt = hxt = hxx = 0.0
+    for k in range(model.n_actuators):
+        w = model.widths[k]
+        if abs(y0[0] - model.centers[k]) > model.cutoff_radius * w + reach:
+            continue
+        s_max, sd_max, sdd_max = channel_bounds(src, k, cur[k, 0], cur[k, 1], t, t + h)
+        htt += sdd_max
+        hxt += sd_max * 0.6065306597126334 / w          # e^(-1/2) / w
+        hxx += s_max / (w * w)
+    normal_acc = model.gravity - htt - 2.0 * hxt * speed - hxx * speed * speed
+    if not model.include_weight:
+        normal_acc -= model.gravity
+    return model.mass * min(0.0, normal_acc) + model.pull_off
 
 
 @jit_inline

@@ -83,12 +83,20 @@ def dopri5_dense(theta: float, h: float, y0: np.ndarray, f0: np.ndarray, y1: np.
                  work: np.ndarray, out: np.ndarray) -> None:
     """DOPRI5's own 4th-order interpolant of the last :func:`dopri5_step` (stages in ``work[1:5]``)."""
     for i in range(y0.size):
-        r2 = y1[i] - y0[i]
-        r3 = h * f0[i] - r2
-        r4 = r2 - h * f1[i] - r3
-        r5 = h * (DP_D[0] * f0[i] + DP_D[1] * work[1, i] + DP_D[2] * work[2, i] + DP_D[3] * work[3, i]
-                  + DP_D[4] * work[4, i] + DP_D[5] * f1[i])
+        r2, r3, r4, r5 = dense_coefficients(i, h, y0, f0, y1, f1, work)
         out[i] = y0[i] + theta * (r2 + (1.0 - theta) * (r3 + theta * (r4 + (1.0 - theta) * r5)))
+
+
+@jit_inline
+def dense_coefficients(i: int, h: float, y0: np.ndarray, f0: np.ndarray, y1: np.ndarray, f1: np.ndarray,
+                       work: np.ndarray) -> tuple[float, float, float, float]:
+    """r2..r5 of entry ``i`` in :func:`dopri5_dense`'s interpolant."""
+    r2 = y1[i] - y0[i]
+    r3 = h * f0[i] - r2
+    r4 = r2 - h * f1[i] - r3
+    r5 = h * (DP_D[0] * f0[i] + DP_D[1] * work[1, i] + DP_D[2] * work[2, i] + DP_D[3] * work[3, i]
+              + DP_D[4] * work[4, i] + DP_D[5] * f1[i])
+    return r2, r3, r4, r5
 
 
 @jit_inline
@@ -100,3 +108,15 @@ def hermite(theta: float, h: float, y0: np.ndarray, f0: np.ndarray, y1: np.ndarr
     a0, b0, a1, b1 = 2 * t3 - 3 * t2 + 1, (t3 - 2 * t2 + theta) * h, -2 * t3 + 3 * t2, (t3 - t2) * h
     for i in range(y0.size):
         out[i] = a0 * y0[i] + b0 * f0[i] + a1 * y1[i] + b1 * f1[i]
+
+
+@jit_inline
+def interpolant_reach(i: int, h: float, y0: np.ndarray, f0: np.ndarray, y1: np.ndarray, f1: np.ndarray,
+                      work: np.ndarray, dense: bool) -> float:
+    """Upper bound of |y_i(θ) − y0_i| over the step's interpolant, θ in [0, 1]: :func:`dopri5_dense`'s
+    (``dense``; its form θ(r2 + (1−θ)(r3 + θ(r4 + (1−θ) r5))) has every factor within [0, 1]) or
+    :func:`hermite`'s (y0 + a1 (y1 − y0) + b0 f0 + b1 f1 with 0 ≤ a1 ≤ 1 and |b0|, |b1| ≤ 4h/27)."""
+    if not dense:
+        return abs(y1[i] - y0[i]) + 4.0 / 27.0 * h * (abs(f0[i]) + abs(f1[i]))
+    r2, r3, r4, r5 = dense_coefficients(i, h, y0, f0, y1, f1, work)
+    return abs(r2) + abs(r3) + abs(r4) + abs(r5)
