@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from model_variants import MARGIN_MODELS
 
 from micro_feeder.physics.dynamics import FeederModel
 from micro_feeder.physics.dynamics import kernel as k
@@ -16,19 +17,8 @@ from micro_feeder.physics.dynamics.layout import N_AUX, N_SCRATCH, SLIDING, STUC
 from micro_feeder.physics.dynamics.rhs import evaluate
 from micro_feeder.physics.dynamics.steppers import dopri5_step
 
-
-def _wave() -> FeederModel:
-    model = FeederModel()
-    return model.replace(surface=model.surface.replace(centers=(-1e-3, 0.0, 1e-3), widths=(1e-3, 8e-4, 1.2e-3)),
-                         stroke=model.stroke.replace(phases=(0.0, 0.25, 0.5), amplitude=150e-6))
-
-
 MODELS = {
-    'default': FeederModel,
-    'no convective terms': lambda: FeederModel().replace(
-        integration=FeederModel().integration.replace(convective_terms=False)),
-    'weight outside N': lambda: FeederModel().replace(detach=FeederModel().detach.replace(include_weight=False)),
-    'three actuators': _wave,
+    **MARGIN_MODELS,
     'take-off strokes (2 kHz)': lambda: FeederModel().replace(stroke=FeederModel().stroke.replace(frequency=2000.0)),
 }
 

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from model_variants import MARGIN_MODELS
 
 from micro_feeder.physics.dynamics import FeederModel
 from micro_feeder.physics.dynamics import kernel as k
@@ -24,20 +25,7 @@ def _base_shaken() -> FeederModel:
     return model.replace(base_acceleration=base)
 
 
-def _wave() -> FeederModel:
-    model = FeederModel()
-    return model.replace(surface=model.surface.replace(centers=(-1e-3, 0.0, 1e-3), widths=(1e-3, 8e-4, 1.2e-3)),
-                         stroke=model.stroke.replace(phases=(0.0, 0.25, 0.5), amplitude=150e-6))
-
-
-MODELS = {
-    'default': FeederModel,
-    'no convective terms': lambda: FeederModel().replace(
-        integration=FeederModel().integration.replace(convective_terms=False)),
-    'weight outside N': lambda: FeederModel().replace(detach=FeederModel().detach.replace(include_weight=False)),
-    'three actuators': _wave,
-    'base acceleration': _base_shaken,
-}
+MODELS = {**MARGIN_MODELS, 'base acceleration': _base_shaken}
 
 
 def _margins(model: FeederModel, mode: int, direction: int, t: float, y: np.ndarray) -> tuple:
