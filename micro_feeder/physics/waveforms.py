@@ -165,16 +165,23 @@ def segment_end(src: tuple, k: int, j: int, i: int) -> float:
 
 
 @jit_inline
+def segment_time(src: tuple, k: int, j: int, i: int, t: float) -> float:
+    """τ (s): time ``t`` measured from the start of channel ``k``'s segment (j, i), repetition j ≥ 0."""
+    start, period, _, _, _, seg_start, _, _ = src
+    return t - (start[k] + j * period[k] + seg_start[k, i])
+
+
+@jit_inline
 def channel_value(src: tuple, k: int, j: int, i: int, t: float) -> tuple[float, float, float, float]:
     """(s, ṡ, s̈, s⃛) of channel ``k`` at ``t`` evaluated on segment (j, i), which may be extrapolated a
     little past its end (a step ending on a breakpoint evaluates its last stage from the left side).
     (Callers that drop s⃛ pay nothing for it: the compiler removes what an inlined caller does not use.)"""
-    start, period, _, before, after, seg_start, seg_coef, _ = src
+    _, _, _, before, after, _, seg_coef, _ = src
     if j == -1:
         return before[k], 0.0, 0.0, 0.0
     if j == -2:
         return after[k], 0.0, 0.0, 0.0
-    tau = t - (start[k] + j * period[k] + seg_start[k, i])
+    tau = segment_time(src, k, j, i, t)
     c = seg_coef[k, i]
     s = c[0] + tau * (c[1] + tau * (c[2] + tau * (c[3] + tau * (c[4] + tau * c[5]))))
     sd = c[1] + tau * (2.0 * c[2] + tau * (3.0 * c[3] + tau * (4.0 * c[4] + tau * 5.0 * c[5])))
@@ -198,12 +205,10 @@ def channel_bounds(src: tuple, k: int, j: int, i: int, t0: float, t1: float) -> 
     """Upper bounds of |s| (m), |ṡ| (m/s) and |s̈| (m/s²) of channel ``k`` on segment (j, i) (as
     :func:`channel_value` evaluates it) for every t in [t0, t1]: each polynomial coefficient's term at the
     largest |τ| of the range, plus the trigonometric term's amplitude times ω⁰, ω¹, ω²."""
-    start, period, _, before, after, seg_start, seg_coef, _ = src
-    if j < 0:
-        return abs(before[k] if j == -1 else after[k]), 0.0, 0.0
-    origin = start[k] + j * period[k] + seg_start[k, i]
-    tau = max(abs(t0 - origin), abs(t1 - origin))
-    c = seg_coef[k, i]
+    if j < 0:                                          # held before or after the schedule
+        return abs(channel_value(src, k, j, i, t0)[0]), 0.0, 0.0
+    tau = max(abs(segment_time(src, k, j, i, t0)), abs(segment_time(src, k, j, i, t1)))
+    c = src[6][k, i]                                   # the segment's coefficients
     s_max = sd_max = sdd_max = 0.0
     power = 1.0                                        # tau^n, from n = 0
     for n in range(6):
