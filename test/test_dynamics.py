@@ -220,3 +220,25 @@ def test_convective_terms_change_little_at_the_seed_operating_point(model):
     seed_form = distance(model.replace(integration=model.integration.replace(convective_terms=False)))
     assert seed_form != with_terms
     assert seed_form == pytest.approx(with_terms, rel=1e-2)
+
+
+def test_breakpoints_an_ulp_apart_cost_no_step_size():
+    """16 actuators in five phase groups: phases computed as 0.2 k put breakpoints of one group ~1e-19 s
+    apart. A step cut short at a breakpoint keeps the step size the error allowed before it, so the run
+    takes about as many steps (rows) as with exactly equal phases (2.1x as many when each such step shrank
+    the next), and moves the part alike."""
+    n = 16
+
+    def wave(phases: list[float]) -> FeederModel:
+        return FeederModel.from_settings({
+            'particle.x0': 0.1e-3, 'surface.centers': [0.5e-3 * (k - n // 2) for k in range(n)],
+            'surface.widths': [0.4e-3] * n, 'stroke.amplitude': 150e-6, 'stroke.frequency': 1000.0,
+            'stroke.phases': phases, 'stroke.count': 20})
+
+    exact = [0.2 * ((k - n // 2) % 5) for k in range(n)]
+    nudged = [phase * (1.0 + 4e-16 * (k % 3)) for k, phase in enumerate(exact)]
+    assert len(set(nudged)) > len(set(exact))
+    steady, jittered = (wave(phases).run(duration=0.02) for phases in (exact, nudged))
+    assert len(jittered.data) <= 1.2 * len(steady.data)
+    assert jittered.state.distance == pytest.approx(steady.state.distance, rel=1e-9)
+    assert jittered.state.transitions == steady.state.transitions

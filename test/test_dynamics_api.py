@@ -96,6 +96,19 @@ def test_piezo_filters_and_limits_the_stroke(model):
     assert np.max(strokes) <= 60e-6 * 1.001
 
 
+def test_state_of_another_model_refused(model):
+    """The piezo stacks take room in the state only when integrated: a state made for a model without
+    them is refused by a model with them (and the other way round), not read past its end."""
+    with_stacks = model.replace(piezo=model.piezo.replace(enabled=True))
+    assert model.initial_state().piezo_stroke.size == 0 and with_stacks.initial_state().piezo_stroke.size == 1
+    for made_by, used_by in ((model, with_stacks), (with_stacks, model)):
+        state = made_by.initial_state()
+        with pytest.raises(ValueError, match='make the state with this model'):
+            used_by.advance(state, 1e-4)
+        with pytest.raises(ValueError, match='make the state with this model'):
+            used_by.observe(state)
+
+
 def test_from_settings_and_parameter_errors():
     m = FeederModel.from_settings(load_settings([], ['surface.centers=[0.0, 2.0e-3]',
                                                      'surface.widths=[1e-3, 1e-3]',

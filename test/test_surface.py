@@ -23,13 +23,13 @@ def strokes(t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def height(x: float, t: float) -> float:
     s, sd, sdd = strokes(t)
-    return surface_at(x, s, sd, sdd, CENTERS, WIDTHS, math.inf)[0]
+    return surface_at(x, s, sd, sdd, CENTERS, WIDTHS, math.inf, 0, CENTERS.size)[0]
 
 
 @pytest.mark.parametrize('x', [-1.3e-3, 0.4e-3, 1.1e-3, 2.5e-3])
 def test_derivatives_match_finite_differences(x):
     t = 3.1e-4
-    h, hx, hxx, ht, htt, hxt = surface_at(x, *strokes(t), CENTERS, WIDTHS, math.inf)
+    h, hx, hxx, ht, htt, hxt = surface_at(x, *strokes(t), CENTERS, WIDTHS, math.inf, 0, CENTERS.size)
     dx, dt = 1e-7, 1e-8
     assert h == pytest.approx(height(x, t), rel=1e-15)
     assert hx == pytest.approx((height(x + dx, t) - height(x - dx, t)) / (2 * dx), rel=1e-6)
@@ -54,3 +54,10 @@ def test_widths_must_match_centers():
         SurfaceParams(centers=(0.0, 1e-3), widths=(1e-3,))
     with pytest.raises(ParameterError, match='surface.widths'):
         SurfaceParams(widths=(-1e-3,))
+
+
+def test_centers_must_increase_along_the_feeder():
+    """The kernel finds the actuators near the part by bisecting the centres; equal centres are allowed."""
+    with pytest.raises(ParameterError, match='surface.centers .*increasing order'):
+        SurfaceParams(centers=(1e-3, 0.0), widths=(1e-3, 1e-3))
+    assert SurfaceParams(centers=(0.0, 0.0, 1e-3), widths=(1e-3,) * 3).n_actuators == 3

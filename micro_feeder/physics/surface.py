@@ -23,7 +23,8 @@ class SurfaceParams(ParameterGroup):
 
     prefix = 'surface'
 
-    centers: tuple = param((0.0,), 'actuator positions c_k along the feeder (frame feeder, x)', 'm',
+    centers: tuple = param((0.0,), 'actuator positions c_k along the feeder (frame feeder, x), in increasing '
+                           'order', 'm',
                            min_length=1, ge=-1.0, le=1.0)
     widths: tuple = param((1e-3,), 'Gaussian profile widths w_k (standard deviation of the bump)', 'm',
                           min_length=1, ge=1e-7, le=1.0)
@@ -35,6 +36,10 @@ class SurfaceParams(ParameterGroup):
         if len(self.widths) != len(self.centers):
             raise ParameterError('surface.widths', list(self.widths),
                                  f'one width per actuator ({len(self.centers)} surface.centers)')
+        if any(b < a for a, b in zip(self.centers, self.centers[1:], strict=False)):
+            raise ParameterError('surface.centers', list(self.centers),
+                                 'actuators listed in increasing order along the feeder (list them by position, '
+                                 'their widths and stroke phases in the same order)')
 
     @property
     def cutoff_radius(self) -> float:
@@ -49,24 +54,27 @@ class SurfaceParams(ParameterGroup):
 
 @jit_inline
 def surface_at(x: float, s: np.ndarray, sd: np.ndarray, sdd: np.ndarray, centers: np.ndarray,
-               widths: np.ndarray, u_cut: float) -> tuple[float, float, float, float, float, float]:
+               widths: np.ndarray, u_cut: float, first: int, stop: int) -> tuple[float, float, float, float, float,
+                                                                                 float]:
     """(h, h_x, h_xx, h_t, h_tt, h_xt) at position ``x`` (m) for strokes s (m), ṡ (m/s), s̈ (m/s²).
 
-    Only the first ``centers.size`` entries of the stroke arrays are read, and only those of actuators
-    with |x − c_k| ≤ w_k·u_cut (``SurfaceParams.cutoff_radius``; ``math.inf`` for the exact full sum).
-    (:func:`surface_jet` without its rates: s̈ stands in for s⃛, and the compiler drops the sums unused.)
+    Only actuators ``first`` to ``stop - 1`` are summed (0 and ``centers.size`` for all), and of those only
+    the ones with |x − c_k| ≤ w_k·u_cut (``SurfaceParams.cutoff_radius``; ``math.inf`` for the exact full
+    sum): with centres in increasing order a caller passes the range of those near x, so that far
+    actuators cost nothing. (:func:`surface_jet` without its rates: s̈ stands in for s⃛, and the compiler
+    drops the sums unused.)
     """
-    return surface_jet(x, s, sd, sdd, sdd, centers, widths, u_cut)[:6]
+    return surface_jet(x, s, sd, sdd, sdd, centers, widths, u_cut, first, stop)[:6]
 
 
 @jit_inline
 def surface_jet(x: float, s: np.ndarray, sd: np.ndarray, sdd: np.ndarray, sddd: np.ndarray, centers: np.ndarray,
-                widths: np.ndarray, u_cut: float) -> tuple[float, float, float, float, float, float, float, float,
-                                                           float, float]:
+                widths: np.ndarray, u_cut: float, first: int, stop: int) -> tuple[float, float, float, float, float,
+                                                                                  float, float, float, float, float]:
     """:func:`surface_at`'s six values, then h_ttt, h_ttx, h_xxt, h_xxx: the rates that the margins' time
     derivatives need (s⃛ in m/s³); the third derivative of the bump is −(u³ − 3u)/w³ · g."""
     h = hx = hxx = ht = htt = hxt = httt = httx = hxxt = hxxx = 0.0
-    for k in range(centers.size):
+    for k in range(first, stop):
         w = widths[k]
         u = (x - centers[k]) / w
         if abs(u) > u_cut:

@@ -8,7 +8,6 @@ import math
 import numpy as np
 
 from .._jit import jit, jit_inline
-from ..surface import surface_at
 from ..waveforms import channel_bounds
 from .layout import (
     AUX_L,
@@ -35,7 +34,7 @@ from .layout import (
     TAKE_OFF,
     KernelModel,
 )
-from .rhs import contact_load, evaluate, sign, strokes_at
+from .rhs import contact_load, evaluate, felt_range, sign, strokes_at, surface_here
 from .steppers import dopri5_dense, hermite, interpolant_reach
 
 
@@ -177,7 +176,8 @@ def adhesion_floor(mode: int, t: float, h: float, y0: np.ndarray, f0: np.ndarray
     reach = interpolant_reach(0, h, y0, f0, y1, f1, work, dense)
     speed = abs(y0[1]) + interpolant_reach(1, h, y0, f0, y1, f1, work, dense) if model.convective else 0.0
     htt = hxt = hxx = 0.0
-    for k in range(model.n_actuators):
+    lo, hi = felt_range(model, y0[0], model.cutoff_radius * model.max_width + reach)
+    for k in range(lo, hi):
         w = model.widths[k]
         if abs(y0[0] - model.centers[k]) > model.cutoff_radius * w + reach:
             continue
@@ -297,10 +297,9 @@ def transition(which: int, t: float, y: np.ndarray, model: KernelModel, src: tup
     """Apply the event of margin ``which`` in the current mode at (t, y) (docs/dynamics.md §1); returns
     the event kind. ``y`` is rewritten for the new mode."""
     mode = iv[IV_MODE]
-    base_acc = strokes_at(t, y, model, src, cur, st, 0.0)
+    base_acc = strokes_at(t, y, model, src, cur, st, aux, 0.0)
     if mode == FLYING:                                     # landing: keep the tangential velocity
-        _h, hx, _hxx, ht, _htt, _hxt = surface_at(y[0], st[0], st[1], st[2], model.centers, model.widths,
-                                                  model.cutoff_radius)
+        _h, hx, _hxx, ht, _htt, _hxt = surface_here(y[0], st, model, aux)
         surface_vz = ht if model.landing_relative else 0.0
         xd = (y[1] + hx * (y[3] - surface_vz)) / (1.0 + hx * hx)
         y[1] = xd
@@ -311,8 +310,7 @@ def transition(which: int, t: float, y: np.ndarray, model: KernelModel, src: tup
         enter(iv, fs, t, SLIDING if xd != 0.0 else STUCK, IV_LANDING, grazing)
         return LANDING
     if which == 1:                                         # take-off with the contact velocity
-        h, hx, _hxx, ht, _htt, _hxt = surface_at(y[0], st[0], st[1], st[2], model.centers, model.widths,
-                                                  model.cutoff_radius)
+        h, hx, _hxx, ht, _htt, _hxt = surface_here(y[0], st, model, aux)
         y[2] = h
         y[3] = ht + hx * y[1]
         iv[IV_FRESH] = 1
@@ -342,7 +340,7 @@ def threshold_decision(t: float, y: np.ndarray, model: KernelModel, src: tuple, 
     (friction opposes the impending motion); stick (ẋ = 0) otherwise. Returns the event kind of a mode
     change, or -1.
     """
-    base_acc = strokes_at(t, y, model, src, cur, st, 0.0)
+    base_acc = strokes_at(t, y, model, src, cur, st, aux, 0.0)
     contact_load(y[0], y[1], st, base_acc, model, aux)
     v_rel = y[1] * aux[AUX_L]
     v_threshold = aux[AUX_QMAX] * model.dt / model.mass

@@ -13,7 +13,6 @@ import math
 import numpy as np
 
 from .._jit import jit
-from ..surface import surface_at
 from .events import first_dip, locate_root, threshold_decision, transition
 from .layout import (
     AUX_GAP,
@@ -64,7 +63,7 @@ from .layout import (
     STUCK,
     KernelModel,
 )
-from .rhs import copy_into, evaluate, finite, interp, locate_all, margin_slopes, strokes_at, wave_step
+from .rhs import copy_into, evaluate, finite, interp, locate_all, margin_slopes, strokes_at, surface_here, wave_step
 from .steppers import dopri5_dense, dopri5_error, dopri5_step, rk4_step
 
 
@@ -81,12 +80,11 @@ def observe(t: float, y: np.ndarray, iv: np.ndarray, model: KernelModel, src: tu
     row[C_XD] = y[1]
     row[C_THETA] = math.atan(aux[AUX_HX])
     row[C_N] = aux[AUX_N]
-    strokes_at(t, y, model, src, cur, st, math.inf)        # every stroke column exact, felt or not
+    strokes_at(t, y, model, src, cur, st, aux, math.inf)        # every stroke column exact, felt or not
     for k in range(model.n_actuators):
         row[N_FIXED_COLUMNS + k] = st[0, k]
     if mode == FLYING:
-        h, _hx, _hxx, ht, _htt, _hxt = surface_at(y[0], st[0], st[1], st[2], model.centers, model.widths,
-                                                  model.cutoff_radius)
+        h, _hx, _hxx, ht, _htt, _hxt = surface_here(y[0], st, model, aux)
         row[C_Z] = y[2]
         row[C_ZD] = y[3]
         row[C_FRICTION] = 0.0
@@ -249,6 +247,9 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
             if h_cap > 0.0:
                 h = min(h, h_cap)
                 h_cap = 0.0
+            # a step cut short by a breakpoint, the target, a dip or the wave's limit says nothing about
+            # the step size the error allows: the size proposed before is kept unless the error rejects it
+            h_proposed = fs[FS_H] if error_control and h < fs[FS_H] else 0.0
             while True:
                 if error_control:
                     dopri5_step(mode, direction, t, y, f0, h, model, src, cur, st, aux, work, y1)
@@ -261,9 +262,10 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
                     break
                 err = dopri5_error(h, f0, work, f1, model.tolerance, dt)
                 if err <= 1.0 or not math.isfinite(err) or h < 1e-14:
-                    fs[FS_H] = h * min(5.0, max(0.2, 0.9 * max(err, 1e-10) ** -0.2))
+                    fs[FS_H] = max(h_proposed, h * min(5.0, max(0.2, 0.9 * max(err, 1e-10) ** -0.2)))
                     break
                 h *= max(0.2, 0.9 * err ** -0.2)
+                h_proposed = 0.0
             end_slope0 = end_slope1 = math.nan
             if dip_search:                      # in closed form where it has one (else NaN)
                 end_slope0, end_slope1 = margin_slopes(mode, direction, y1, f1, model, st, aux)

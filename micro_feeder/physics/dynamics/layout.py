@@ -38,6 +38,7 @@ class KernelModel(NamedTuple):
     event_tolerance: float      # time tolerance of event location (s)
     cutoff_radius: float        # surface.cutoff as a radius in widths (inf: exact sum; docs/dynamics.md)
     min_width: float            # the narrowest actuator width (m)
+    max_width: float            # the widest actuator width (m)
     piezo_omega: float          # piezo stack natural angular frequency (rad/s)
     piezo_zeta: float           # piezo stack damping ratio
     piezo_min: float            # piezo travel limits (m)
@@ -51,7 +52,7 @@ class KernelModel(NamedTuple):
     piezo: bool                 # piezo stack dynamics integrated (state y[4:])
     has_base: bool              # test-only base-acceleration channel after the actuators
     record: bool                # write one output row per step and event
-    centers: np.ndarray         # actuator centres (m)
+    centers: np.ndarray         # actuator centres (m), in increasing order
     widths: np.ndarray          # actuator widths (m)
     load_n: np.ndarray          # contact tables: normal load (N) ...
     q_max_n: np.ndarray         # ... and Q_max at that load (N), separation (m) at that load
@@ -78,10 +79,11 @@ FS_T, FS_T_ENTRY, FS_MAX_SPEED, FS_H, FS_AHEAD_T0, FS_AHEAD_T1, FS_START_SLOPE0,
 N_FS = 8
 N_SCRATCH = 11
 
-# aux: quantities of the last evaluation
+# aux: quantities of the last evaluation; AUX_FELT_LO/HI: the range of actuators whose strokes the last
+# evaluation filled in ``st`` (the other columns are stale: read ``st`` through ``rhs.felt``)
 (AUX_N, AUX_T_REQ, AUX_QMAX, AUX_L, AUX_H, AUX_HX, AUX_HT, AUX_GAP, AUX_XS, AUX_LOAD_INDEX,
- AUX_ROOT_SLOPE) = range(11)
-N_AUX = 11
+ AUX_ROOT_SLOPE, AUX_FELT_LO, AUX_FELT_HI) = range(13)
+N_AUX = 13
 
 # Columns of a recorded row (then one stroke column per actuator).
 (C_T, C_MODE, C_X, C_Z, C_XD, C_ZD, C_THETA, C_N, C_FRICTION, C_QMAX, C_SEPARATION, C_GAP, C_H,

@@ -83,8 +83,8 @@ class FeederState:
     numpy arrays shared with the kernel; read them through the properties.
     """
 
-    def __init__(self, n_actuators: int, x0: float):
-        self.y = np.zeros(4 + 2 * n_actuators)
+    def __init__(self, n_stacks: int, x0: float):
+        self.y = np.zeros(4 + 2 * n_stacks)           # [x, ẋ, z, ż], then (s_k, ṡ_k) per piezo stack
         self.y[0] = x0
         self.iv = np.zeros(layout.N_IV, dtype=np.int64)
         self.iv[layout.IV_ENTRY_COUNTER] = -1
@@ -134,7 +134,8 @@ class FeederState:
 
     @property
     def piezo_stroke(self) -> np.ndarray:
-        """Each piezo stack's extension (m), a view into the state (zeros unless ``piezo.enabled``)."""
+        """Each piezo stack's extension (m), a view into the state (empty unless ``piezo.enabled``: only then
+        are the stacks integrated, so only then do they take room in the state every step works on)."""
         return self.y[4::2]
 
     @property
@@ -216,7 +217,7 @@ class FeederModel:
             mass=self.particle.mass, gravity=self.particle.gravity, pull_off=self.contact_model.pull_off_n,
             dt=integration.dt, tolerance=integration.tolerance, check_step=integration.check_step,
             event_tolerance=integration.event_tolerance, cutoff_radius=surface.cutoff_radius,
-            min_width=min(surface.widths),
+            min_width=min(surface.widths), max_width=max(surface.widths),
             piezo_omega=piezo.omega_n, piezo_zeta=piezo.damping, piezo_min=piezo.stroke_min,
             piezo_max=piezo.stroke_max)
         flags = dict(
@@ -270,11 +271,11 @@ class FeederModel:
 
     def initial_state(self, x0: float | None = None) -> FeederState:
         """t = 0, part stuck at ``x0`` (default ``particle.x0``), at rest."""
-        return FeederState(self.n_actuators, self.particle.x0 if x0 is None else x0)
+        return FeederState(self._n_stacks, self.particle.x0 if x0 is None else x0)
 
     def flying_state(self, x: float, z: float, vx: float, vz: float, t: float = 0.0) -> FeederState:
         """A part in flight at (x, z) (m) with velocity (vx, vz) (m/s) at time ``t``."""
-        state = FeederState(self.n_actuators, x)
+        state = FeederState(self._n_stacks, x)
         state.y[:4] = x, vx, z, vz
         state.iv[layout.IV_MODE] = layout.FLYING
         state.fs[layout.FS_T] = t
@@ -377,6 +378,7 @@ class FeederModel:
                      ) -> tuple[np.ndarray, np.ndarray]:
         """The output row (1, columns) at ``state.t`` and the strokes' s, ṡ, s̈, s⃛ per channel (4, channels)
         the kernel evaluated for it."""
+        self._check_state(state)
         table = source.table_at(state.t) if isinstance(source, StrokeSchedule) else source
         src = self._source_table(table).as_tuple()
         n_ch = src[0].size
@@ -391,6 +393,7 @@ class FeederModel:
     def _integrate(self, state: FeederState, t_target: float,
                    source: StrokeTable | StrokeSchedule | None, record: bool
                    ) -> tuple[EventList, list[np.ndarray]]:
+        self._check_state(state)
         packed = self._kernel_model._replace(record=record)
         ev_i = np.zeros((1024, 3), dtype=np.int64)
         ev_f = np.zeros((1024, 2))
@@ -417,6 +420,17 @@ class FeederModel:
                 if status in (layout.NON_FINITE, layout.EVENT_NOT_LOCATED, layout.CHATTER):
                     raise SimulationError(self._failure(status, state))
         return EventList.concatenate(events), recorded
+
+    @property
+    def _n_stacks(self) -> int:
+        """Piezo stacks in the state: one per actuator with ``piezo.enabled``, none otherwise."""
+        return self.n_actuators if self.piezo.enabled else 0
+
+    def _check_state(self, state: FeederState) -> None:
+        if state.y.size != 4 + 2 * self._n_stacks:
+            raise ValueError(f'the state holds {(state.y.size - 4) // 2} piezo stacks, this model integrates '
+                             f'{self._n_stacks} (piezo.enabled {self.piezo.enabled}, {self.n_actuators} '
+                             'actuators): make the state with this model (initial_state or flying_state)')
 
     def _failure(self, status: int, state: FeederState) -> str:
         what = {layout.NON_FINITE: 'the state or the contact load became non-finite',

@@ -12,6 +12,8 @@ from ..piezo import piezo_acceleration
 from ..surface import surface_at, surface_jet
 from ..waveforms import COEF_OMEGA, channel_value, locate_segment, segment_end
 from .layout import (
+    AUX_FELT_HI,
+    AUX_FELT_LO,
     AUX_GAP,
     AUX_H,
     AUX_HT,
@@ -59,6 +61,9 @@ def attraction(gap_m: np.ndarray, attraction_n: np.ndarray, gap: float) -> float
     return interp(gap_m, attraction_n, max(gap, 0.0))
 
 
+# Rows of at most this many actuators are summed whole: bisecting them costs more than it skips.
+SHORT_ROW = 8
+
 # In flight the closest surface point x_s is not at the part's x: strokes are evaluated one width farther
 # than the cutoff radius (then every actuator surface_at includes at x_s is evaluated while |x_s - x| is
 # within the narrowest width; beyond, evaluate() takes them all).
@@ -66,26 +71,52 @@ FLIGHT_REACH = 1.0
 
 
 @jit_inline
+def felt_range(model: KernelModel, x: float, reach: float) -> tuple[int, int]:
+    """The range of actuators centred within ``reach`` (m) of ``x``: two bisections of the (increasing)
+    centres, so that actuators far from the part cost nothing; all of them for inf or a short row."""
+    if not reach < math.inf or model.n_actuators <= SHORT_ROW:
+        return 0, model.n_actuators
+    return (int(np.searchsorted(model.centers, x - reach)),
+            int(np.searchsorted(model.centers, x + reach, side='right')))
+
+
+@jit_inline
+def felt(model: KernelModel, aux: np.ndarray) -> tuple[int, int]:
+    """The range of actuators whose strokes the last :func:`strokes_at` filled."""
+    return int(aux[AUX_FELT_LO]), int(aux[AUX_FELT_HI])
+
+
+@jit_inline
+def surface_here(x: float, st: np.ndarray, model: KernelModel,
+                 aux: np.ndarray) -> tuple[float, float, float, float, float, float]:
+    """:func:`surface_at` at ``x`` (m) from the strokes the last :func:`strokes_at` filled in ``st``."""
+    first, stop = felt(model, aux)
+    return surface_at(x, st[0], st[1], st[2], model.centers, model.widths, model.cutoff_radius, first, stop)
+
+
+@jit_inline
 def strokes_at(t: float, y: np.ndarray, model: KernelModel, src: tuple, cur: np.ndarray,
-               st: np.ndarray, reach: float) -> float:
+               st: np.ndarray, aux: np.ndarray, reach: float) -> float:
     """Fill ``st`` (4, channels) with s, ṡ, s̈, s⃛ at ``t`` on the segments ``cur``; return the base
     acceleration (m/s², 0 without the test-only base channel). With the piezo model the actuators'
     s, ṡ come from the state and s̈ from the stack dynamics driven by the commanded stroke (s⃛ unused).
 
-    An actuator farther than ``model.cutoff_radius + reach`` of its widths from x = y[0] reads 0 instead of
-    its stroke (``reach`` 0: those ``surface_at`` skips at x; ``inf``: every stroke, as with the piezo model,
-    whose every stack is integrated)."""
+    Only the actuators within ``model.cutoff_radius + reach`` of their widths from x = y[0] read their
+    strokes (``reach`` 0: those ``surface_at`` keeps at x; ``inf``: every stroke, as with the piezo model,
+    whose every stack is integrated). The range of columns filled (:func:`felt_range`, kept in ``aux``)
+    is read back with :func:`felt`; the columns outside it are left as they were."""
     n_act = model.n_actuators
     radius = math.inf if model.piezo else model.cutoff_radius + reach
-    for k in range(st.shape[1]):
-        if k < n_act and abs((y[0] - model.centers[k]) / model.widths[k]) > radius:
+    lo, hi = felt_range(model, y[0], radius * model.max_width)
+    aux[AUX_FELT_LO] = lo
+    aux[AUX_FELT_HI] = hi
+    for k in range(lo, hi):
+        if abs((y[0] - model.centers[k]) / model.widths[k]) > radius:
             st[0, k] = st[1, k] = st[2, k] = st[3, k] = 0.0
             continue
-        s, sd, sdd, sddd = channel_value(src, k, cur[k, 0], cur[k, 1], t)
-        st[0, k] = s
-        st[1, k] = sd
-        st[2, k] = sdd
-        st[3, k] = sddd
+        stroke_into(st, k, src, cur, t)
+    if model.has_base:
+        stroke_into(st, n_act, src, cur, t)
     if model.piezo:
         for k in range(n_act):
             s = y[4 + 2 * k]
@@ -98,6 +129,16 @@ def strokes_at(t: float, y: np.ndarray, model: KernelModel, src: tuple, cur: np.
 
 
 @jit_inline
+def stroke_into(st: np.ndarray, k: int, src: tuple, cur: np.ndarray, t: float) -> None:
+    """Column ``k`` of ``st``: channel k's s, ṡ, s̈, s⃛ at ``t`` on its segment ``cur[k]``."""
+    s, sd, sdd, sddd = channel_value(src, k, cur[k, 0], cur[k, 1], t)
+    st[0, k] = s
+    st[1, k] = sd
+    st[2, k] = sdd
+    st[3, k] = sddd
+
+
+@jit_inline
 def contact_load(x: float, xd: float, st: np.ndarray, base_acc: float, model: KernelModel,
                  aux: np.ndarray) -> None:
     """Normal load N, required friction T_req and Q_max(N) for a part on the surface at (x, ẋ).
@@ -106,7 +147,7 @@ def contact_load(x: float, xd: float, st: np.ndarray, base_acc: float, model: Ke
     acceleration, 0 except in the flat-surface check), and ẍ = (T − T_req) / (m L).
     """
     m = model.mass
-    h, hx, hxx, ht, htt, hxt = surface_at(x, st[0], st[1], st[2], model.centers, model.widths, model.cutoff_radius)
+    h, hx, hxx, ht, htt, hxt = surface_here(x, st, model, aux)
     length = math.sqrt(1.0 + hx * hx)
     normal_acc = htt + model.gravity - hx * base_acc
     if model.convective:
@@ -125,15 +166,14 @@ def contact_load(x: float, xd: float, st: np.ndarray, base_acc: float, model: Ke
 def closest_point(x: float, z: float, st: np.ndarray, model: KernelModel, aux: np.ndarray) -> None:
     """Closest surface point to (x, z) by Newton on its abscissa x_s; sets AUX_XS, AUX_H, AUX_HX (at
     x_s), AUX_L and AUX_GAP = signed distance along the normal there (> 0 above the surface)."""
-    centers, widths = model.centers, model.widths
     xs = x
     for _ in range(20):
-        h, hx, hxx, _ht, _htt, _hxt = surface_at(xs, st[0], st[1], st[2], centers, widths, model.cutoff_radius)
+        h, hx, hxx, _ht, _htt, _hxt = surface_here(xs, st, model, aux)
         step = ((xs - x) + (h - z) * hx) / (1.0 + hx * hx + (h - z) * hxx)
         xs -= step
         if abs(step) <= 1e-15 + 1e-13 * abs(xs):
             break
-    h, hx, _hxx, _ht, _htt, _hxt = surface_at(xs, st[0], st[1], st[2], centers, widths, model.cutoff_radius)
+    h, hx, _hxx, _ht, _htt, _hxt = surface_here(xs, st, model, aux)
     length = math.sqrt(1.0 + hx * hx)
     aux[AUX_XS] = xs
     aux[AUX_H] = h
@@ -147,7 +187,7 @@ def evaluate(mode: int, direction: int, t: float, y: np.ndarray, model: KernelMo
              cur: np.ndarray, st: np.ndarray, aux: np.ndarray, dy: np.ndarray) -> tuple[float, float]:
     """Right-hand side ``dy`` of mode ``mode`` at (t, y), and the mode's two margins."""
     m = model.mass
-    base_acc = strokes_at(t, y, model, src, cur, st, FLIGHT_REACH if mode == FLYING else 0.0)
+    base_acc = strokes_at(t, y, model, src, cur, st, aux, FLIGHT_REACH if mode == FLYING else 0.0)
     for i in range(dy.size):
         dy[i] = 0.0
     if model.piezo:
@@ -157,7 +197,7 @@ def evaluate(mode: int, direction: int, t: float, y: np.ndarray, model: KernelMo
     if mode == FLYING:
         closest_point(y[0], y[2], st, model, aux)
         if abs(aux[AUX_XS] - y[0]) > FLIGHT_REACH * model.min_width:     # beyond the strokes evaluated:
-            strokes_at(t, y, model, src, cur, st, math.inf)              # take them all and look again
+            strokes_at(t, y, model, src, cur, st, aux, math.inf)              # take them all and look again
             closest_point(y[0], y[2], st, model, aux)
         f_att = attraction(model.gap_m, model.attraction_n, aux[AUX_GAP])
         aux[AUX_N] = -f_att
@@ -198,8 +238,10 @@ def margin_slopes(mode: int, direction: int, y: np.ndarray, dy: np.ndarray, mode
     m = model.mass
     v = y[1] if mode != STUCK else 0.0
     a = dy[1] if mode != STUCK else 0.0
+    first, stop = felt(model, aux)
     (_h, hx, hxx, _ht, htt, hxt, httt, httx, hxxt,
-     hxxx) = surface_jet(y[0], st[0], st[1], st[2], st[3], model.centers, model.widths, model.cutoff_radius)
+     hxxx) = surface_jet(y[0], st[0], st[1], st[2], st[3], model.centers, model.widths, model.cutoff_radius, first,
+                         stop)
     n_act = model.n_actuators
     base, base_rate = (st[2, n_act], st[3, n_act]) if model.has_base else (0.0, 0.0)
     hx_rate = hxt + hxx * v
