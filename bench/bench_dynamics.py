@@ -10,7 +10,9 @@ Usage: .venv/bin/python bench/bench_dynamics.py [--skip-compile]
 2. A 200-frequency x 5-stroke sweep (100..5000 Hz) on 2 worker processes, wall time. Target <= 5 s.
 3. Accuracy of the default step: distance per stroke with the default integration settings against
    the dt -> 0 limit (tight tolerance, 1 us largest step) on the benchmark cases. Target <= 0.1 %.
-4. First-call compile time of the kernel in a fresh process with an empty numba cache (what a new
+4. Far actuators (issue 10): bench/bench_cutoff.py's travelling wave on 1, 16 and 64 actuators (target:
+   64 within 2x of 1 actuator).
+5. First-call compile time of the kernel in a fresh process with an empty numba cache (what a new
    installation pays once; later processes load the cache).
 """
 
@@ -19,6 +21,8 @@ import subprocess
 import sys
 import tempfile
 import time
+
+import bench_cutoff
 
 from micro_feeder.explore.sweep import sweep
 from micro_feeder.physics.dynamics import FeederModel
@@ -95,6 +99,7 @@ def main() -> None:
     speed(model)
     sweep_time()
     accuracy(model)
+    bench_cutoff.main()
     if '--skip-compile' not in sys.argv:
         compile_time()
 
