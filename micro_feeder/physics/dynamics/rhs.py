@@ -197,7 +197,7 @@ def evaluate(mode: int, direction: int, t: float, y: np.ndarray, model: KernelMo
     if mode == FLYING:
         closest_point(y[0], y[2], st, model, aux)
         if abs(aux[AUX_XS] - y[0]) > FLIGHT_REACH * model.min_width:     # beyond the strokes evaluated:
-            strokes_at(t, y, model, src, cur, st, aux, math.inf)              # take them all and look again
+            strokes_at(t, y, model, src, cur, st, aux, math.inf)         # take them all and look again
             closest_point(y[0], y[2], st, model, aux)
         f_att = attraction(model.gap_m, model.attraction_n, aux[AUX_GAP])
         aux[AUX_N] = -f_att
