@@ -224,7 +224,16 @@ def test_executor_on_another_thread_while_the_loop_runs(ros_context: Context) ->
     executor = SingleThreadedExecutor(context=ros_context)
     executor.add_node(sim)
     executor.add_node(probe)
-    spinner = threading.Thread(target=executor.spin, name='test-executor', daemon=True)
+    spinning = threading.Event()
+    spinning.set()
+
+    def spin() -> None:
+        while spinning.is_set():
+            executor.spin_once(timeout_sec=0.05)
+
+    # stopped before executor.shutdown(): shutting an executor down while another thread spins it races
+    # with its guard condition (rclpy raises InvalidHandle in that thread)
+    spinner = threading.Thread(target=spin, name='test-executor', daemon=True)
     spinner.start()
     try:
         _poll(lambda: len(probe.msgs['particle/pose']) > 100, 'poses from the loop thread')
@@ -256,9 +265,10 @@ def test_executor_on_another_thread_while_the_loop_runs(ros_context: Context) ->
         assert call(SetBool, 'simulator/pause', SetBool.Request(data=True)).success      # gets in between ticks
         assert sim.rejected == 0 and not sim.error
     finally:
-        executor.shutdown()
+        spinning.clear()
         spinner.join(TIMEOUT)
         alive = spinner.is_alive()
+        executor.shutdown()
         probe.destroy_node()
         sim.destroy_node()
     assert not alive, 'executor thread did not stop'
