@@ -80,7 +80,7 @@ def observe(t: float, y: np.ndarray, iv: np.ndarray, model: KernelModel, src: tu
     row[C_XD] = y[1]
     row[C_THETA] = math.atan(aux[AUX_HX])
     row[C_N] = aux[AUX_N]
-    strokes_at(t, y, model, src, cur, st, aux, math.inf)        # every stroke column exact, felt or not
+    strokes_at(t, y, model, src, cur, st, aux, math.inf)   # every stroke column exact, felt or not
     for k in range(model.n_actuators):
         row[N_FIXED_COLUMNS + k] = st[0, k]
     if mode == FLYING:

@@ -427,8 +427,8 @@ class FeederModel:
         return self.n_actuators if self.piezo.enabled else 0
 
     def _check_state(self, state: FeederState) -> None:
-        if state.y.size != 4 + 2 * self._n_stacks:
-            raise ValueError(f'the state holds {(state.y.size - 4) // 2} piezo stacks, this model integrates '
+        if state.piezo_stroke.size != self._n_stacks:
+            raise ValueError(f'the state holds {state.piezo_stroke.size} piezo stacks, this model integrates '
                              f'{self._n_stacks} (piezo.enabled {self.piezo.enabled}, {self.n_actuators} '
                              'actuators): make the state with this model (initial_state or flying_state)')
 
