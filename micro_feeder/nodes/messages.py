@@ -6,6 +6,7 @@ at the part with x along the surface tangent and z along its normal, tilted by Î
 
 from __future__ import annotations
 
+import functools
 import math
 import struct
 from collections.abc import Callable, Sequence
@@ -15,7 +16,7 @@ from builtin_interfaces.msg import Duration, Time
 from geometry_msgs.msg import Point, PoseStamped, TwistStamped, WrenchStamped
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Header
+from std_msgs.msg import Header, String
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import Marker, MarkerArray
 
@@ -26,16 +27,21 @@ FEEDER_FRAME = 'feeder'
 CONTACT_FRAME = 'contact'
 
 
+def stamp_parts(t: float) -> tuple[int, int]:
+    """``t`` (s, >= 0) as (sec, nanosec) of a ROS Time or Duration, rounded to the nanosecond."""
+    return divmod(round(t * 1e9), 1_000_000_000)
+
+
 def to_time(t: float) -> Time:
     """Sim time ``t`` (s, >= 0) as a ROS Time, rounded to the nanosecond."""
-    ns = round(t * 1e9)
-    return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+    sec, nanosec = stamp_parts(t)
+    return Time(sec=sec, nanosec=nanosec)
 
 
 def to_duration(t: float) -> Duration:
     """A duration ``t`` (s, >= 0) as a ROS Duration, rounded to the nanosecond."""
-    ns = round(t * 1e9)
-    return Duration(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
+    sec, nanosec = stamp_parts(t)
+    return Duration(sec=sec, nanosec=nanosec)
 
 
 def seconds(t: Time | Duration) -> float:
@@ -50,6 +56,15 @@ def header_stamp(data: bytes) -> float:
         return 0.0
     sec, nanosec = struct.unpack_from('<iI' if data[1] == 1 else '>iI', data, 4)
     return sec + nanosec * 1e-9
+
+
+@functools.cache
+def contact_state_bytes(mode: str) -> bytes:
+    """The serialized ``particle/contact_state`` String of ``mode`` (one per mode, serialized once: it is
+    published at every mode change, up to a few times a tick)."""
+    from rclpy.serialization import serialize_message
+
+    return serialize_message(String(data=mode))
 
 
 def tilt_quaternion(theta: float) -> tuple[float, float, float, float]:
@@ -152,8 +167,7 @@ class StateMessages:
 
     def update(self, obs: Observation, stroke_velocities: np.ndarray) -> Time:
         """Serialize every message from ``obs`` at its sim time; returns that time as a ROS Time."""
-        ns = round(obs.t * 1e9)
-        sec, nanosec = ns // 1_000_000_000, ns % 1_000_000_000
+        sec, nanosec = stamp_parts(obs.t)
         self.pose = self._pose.serialize(sec, nanosec, (obs.x, 0.0, obs.z, *tilt_quaternion(obs.theta)))
         self.twist = self._twist.serialize(sec, nanosec, (obs.xdot, 0.0, obs.zdot, 0.0, 0.0, 0.0))
         self.wrench = self._wrench.serialize(sec, nanosec, (obs.friction, 0.0, obs.normal_load, 0.0, 0.0, 0.0))

@@ -58,7 +58,7 @@ from .commands import joint_names, parse_setpoints, parse_trajectory, parse_traj
 from .parameters import check_changes, declare, model_specs, values
 from .spin import spin_node
 from .stepper import Stepper, build_model
-from .transitions import transition_message
+from .transitions import TransitionEncoder
 
 NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
     'publish_rate': (ParamSpec('rate of the loop timer and of the state topics', 'Hz', gt=0, le=10000,
@@ -172,7 +172,7 @@ class Simulator(Node):
         self._window = (time.perf_counter(), self._stepper.t, 0)
         self.achieved_rtf = 0.0
         self._last_markers = -float('inf')
-        self._status_source = status_name(self, 'transition').removesuffix(': transition')
+        self._transitions = TransitionEncoder(status_name(self, 'transition').removesuffix(': transition'))
         self._configure_outputs()
         self._publish_parameters()
         self._publish_state([])
@@ -328,7 +328,7 @@ class Simulator(Node):
         self._pub_joints.publish(state.joints)
         for event in events:
             if event.kind != 'reversal':
-                self._pub_transitions.publish(transition_message(event, self._status_source))
+                self._pub_transitions.publish(self._transitions.encode(event))
                 self._publish_mode(event.to_mode)
         self._publish_mode(obs.mode)
         if self._pub_clock is not None:
@@ -341,7 +341,7 @@ class Simulator(Node):
     def _publish_mode(self, mode: str) -> None:
         if mode != self._mode:
             self._mode = mode
-            self._pub_mode.publish(String(data=mode))
+            self._pub_mode.publish(messages.contact_state_bytes(mode))
 
     def _configure_outputs(self) -> None:
         """Per-model output buffers: the state messages (one joint per actuator) and the surface markers."""

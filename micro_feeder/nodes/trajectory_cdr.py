@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from builtin_interfaces.msg import Time
 
-ENCAPSULATION = b'\x00\x01\x00\x00'       # CDR, little endian
+from .cdr import ENCAPSULATION, put_string, put_uint32
 
 
 def _record(n: int) -> np.dtype:
@@ -34,10 +34,6 @@ def point_bytes(n_joints: int) -> int:
     return _record(n_joints).itemsize
 
 
-def _align(buf: bytearray) -> None:
-    buf += b'\0' * (-len(buf) % 4)
-
-
 def encode(names: Sequence[str], offsets_ns: np.ndarray, positions: np.ndarray, velocities: np.ndarray,
            accelerations: np.ndarray, stamp: Time) -> bytes:
     """The serialized JointTrajectory (header stamp, empty frame_id, ``names``) with knots at
@@ -46,15 +42,12 @@ def encode(names: Sequence[str], offsets_ns: np.ndarray, positions: np.ndarray, 
     n_points, n = np.shape(positions)
     if not n:
         raise ValueError('trajectory_cdr.encode: at least one joint')
-    head = bytearray(struct.pack('<iII', stamp.sec, stamp.nanosec, 1) + b'\0')        # stamp, frame_id ''
-    _align(head)
-    head += struct.pack('<I', len(names))
+    head = bytearray(struct.pack('<iI', stamp.sec, stamp.nanosec))
+    put_string(head, '')                                                    # frame_id
+    put_uint32(head, len(names))
     for name in names:
-        data = name.encode() + b'\0'
-        _align(head)
-        head += struct.pack('<I', len(data)) + data
-    _align(head)
-    head += struct.pack('<I', n_points)
+        put_string(head, name)
+    put_uint32(head, n_points)
     record = np.zeros(n_points, dtype=_record(n))
     record['n_pos'] = record['n_vel'] = record['n_acc'] = n
     record['pos'], record['vel'], record['acc'] = positions, velocities, accelerations

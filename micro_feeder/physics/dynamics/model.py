@@ -20,6 +20,7 @@ docs/dynamics.md §1 (``feeder``: x along the feeder, z up; ``contact``: tilted 
 from __future__ import annotations
 
 import math
+import threading
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -234,6 +235,7 @@ class FeederModel:
             centers=np.asarray(surface.centers, dtype=float), widths=np.asarray(surface.widths, dtype=float),
             n_actuators=int(surface.n_actuators))
         object.__setattr__(self, '_kernel_model', packed)
+        object.__setattr__(self, '_recording_model', packed._replace(record=True))
 
     @classmethod
     def from_settings(cls, flat: Mapping[str, Any], **overrides: Any) -> FeederModel:
@@ -377,35 +379,28 @@ class FeederModel:
     def _observe_row(self, state: FeederState, source: StrokeTable | StrokeSchedule | None
                      ) -> tuple[np.ndarray, np.ndarray]:
         """The output row (1, columns) at ``state.t`` and the strokes' s, ṡ, s̈, s⃛ per channel (4, channels)
-        the kernel evaluated for it."""
+        the kernel evaluated for it (the latter a work array: read it before the next kernel call)."""
         self._check_state(state)
         table = source.table_at(state.t) if isinstance(source, StrokeSchedule) else source
         src = self._source_table(table).as_tuple()
-        n_ch = src[0].size
-        cur = np.zeros((n_ch, 2), dtype=np.int64)
-        k.locate_all(src, state.t, cur)
+        work = _WORK.arrays(state.y.size, src[0].size)
+        k.locate_all(src, state.t, work.cur)
         row = np.zeros((1, layout.N_FIXED_COLUMNS + self.n_actuators))
-        st = np.zeros((4, n_ch))
-        k.observe(state.t, state.y, state.iv, self._kernel_model, src, cur, st,
-                  np.zeros(layout.N_AUX), np.zeros(state.y.size), row[0])
-        return row, st
+        k.observe(state.t, state.y, state.iv, self._kernel_model, src, work.cur, work.st, work.aux, work.dy, row[0])
+        return row, work.st
 
     def _integrate(self, state: FeederState, t_target: float,
                    source: StrokeTable | StrokeSchedule | None, record: bool
                    ) -> tuple[EventList, list[np.ndarray]]:
         self._check_state(state)
-        packed = self._kernel_model._replace(record=record)
-        ev_i = np.zeros((1024, 3), dtype=np.int64)
-        ev_f = np.zeros((1024, 2))
-        rec = np.zeros((4096 if record else 2, layout.N_FIXED_COLUMNS + self.n_actuators))
+        packed = self._recording_model if record else self._kernel_model
         events: list[EventList] = []
         recorded: list[np.ndarray] = []
-        scratch = np.zeros((layout.N_SCRATCH, state.y.size))
-        aux = np.zeros(layout.N_AUX)
         for t_until, t_limit, table in self._segments(state.t, t_target, source):
             src = self._source_table(table).as_tuple()
-            st = np.zeros((4, src[0].size))
-            cur = np.zeros((src[0].size, 2), dtype=np.int64)
+            work = _WORK.arrays(state.y.size, src[0].size)
+            ev_i, ev_f, scratch, st, aux, cur = work.ev_i, work.ev_f, work.scratch, work.st, work.aux, work.cur
+            rec = work.records(layout.N_FIXED_COLUMNS + self.n_actuators, record)
             on = state.ahead_on
             if not (on and on[0] is self and on[1] is table and on[2] == t_limit):
                 state.fs[layout.FS_AHEAD_T1] = math.nan      # taken on another model or source: not valid
@@ -439,3 +434,46 @@ class FeederModel:
         return (f'{what} at t = {state.t:.9g} s in mode {state.mode} '
                 f'(x = {state.x:.9g} m, state vector {state.y.tolist()}); '
                 f'try a smaller integration.dt')
+
+
+class _KernelWork:
+    """The kernel's work arrays for one state size and channel count (what ``kernel.advance`` and
+    ``kernel.observe`` take as ``ev_i``, ``ev_f``, ``scratch``, ``st``, ``aux``, ``cur``, ``dy``, ``rec``).
+
+    The kernel writes every entry it reads (``aux``'s load-table index is only where a search starts), so
+    they are kept between calls instead of allocated for each: the simulator node advances 1 ms a tick, and
+    allocating them per call took a fifth of the tick's Python time."""
+
+    def __init__(self, n_y: int, n_channels: int):
+        self.ev_i = np.zeros((1024, 3), dtype=np.int64)
+        self.ev_f = np.zeros((1024, 2))
+        self.scratch = np.zeros((layout.N_SCRATCH, n_y))
+        self.st = np.zeros((4, n_channels))
+        self.aux = np.zeros(layout.N_AUX)
+        self.cur = np.zeros((n_channels, 2), dtype=np.int64)
+        self.dy = np.zeros(n_y)
+        self._records: dict[tuple[int, bool], np.ndarray] = {}
+
+    def records(self, n_columns: int, record: bool) -> np.ndarray:
+        """The output-row buffer: 4096 rows when recording, else the 2 the kernel still needs."""
+        key = (n_columns, record)
+        if key not in self._records:
+            self._records[key] = np.zeros((4096 if record else 2, n_columns))
+        return self._records[key]
+
+
+class _ThreadWork(threading.local):
+    """:class:`_KernelWork` per thread and size: the compiled kernel releases the GIL, so two threads may
+    integrate at once and must not share work arrays."""
+
+    def __init__(self) -> None:
+        self._by_size: dict[tuple[int, int], _KernelWork] = {}
+
+    def arrays(self, n_y: int, n_channels: int) -> _KernelWork:
+        work = self._by_size.get((n_y, n_channels))
+        if work is None:
+            work = self._by_size[(n_y, n_channels)] = _KernelWork(n_y, n_channels)
+        return work
+
+
+_WORK = _ThreadWork()
