@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import numpy as np
@@ -52,10 +52,17 @@ class Rig:
         wait_until(predicate, timeout, executor=self.executor, what=what)
 
     def send_trajectory(self, msg: JointTrajectory) -> None:
-        before = (len(self.sim.stepper.schedule.pieces), self.sim.rejected, id(self.sim.stepper.schedule))
+        applied = self.command_taken()
         self.probe.publish('actuator/trajectory', msg, self.executor)
-        self.wait(lambda: (len(self.sim.stepper.schedule.pieces), self.sim.rejected,
-                           id(self.sim.stepper.schedule)) != before, 'trajectory applied or rejected')
+        self.wait(applied, 'trajectory applied or rejected')
+
+    def command_taken(self) -> Callable[[], bool]:
+        """Whether a command was applied (a new table at the schedule's end, or a new schedule) or refused
+        since this call (the objects are held, so a new one cannot reuse an old one's id)."""
+        schedule, rejected = self.sim.stepper.schedule, self.sim.rejected
+        last = schedule.pieces[-1][1]
+        return lambda: (self.sim.stepper.schedule is not schedule or self.sim.rejected != rejected
+                        or self.sim.stepper.schedule.pieces[-1][1] is not last)
 
     def step(self, n: int = 1) -> None:
         self.probe.step(self.executor, n)
@@ -253,8 +260,9 @@ def test_bad_commands_are_rejected_counted_and_change_nothing(stepped: Rig) -> N
 def test_setpoints_through_the_piezo_model(ros_context: Context) -> None:
     rig = Rig(ros_context, start_paused=True, step_period=STEP, **{'piezo.enabled': True})
     try:
+        applied = rig.command_taken()
         rig.probe.publish('actuator/command', Float64MultiArray(data=[30e-6]), rig.executor)
-        rig.wait(lambda: len(rig.sim.stepper.schedule.pieces) == 2, 'set-point applied')
+        rig.wait(applied, 'set-point applied')
         rig.step(3)
         positions = [j.position[0] for j in rig.probe.msgs['actuator/joint_states'][-3:]]
         assert positions[-1] == pytest.approx(30e-6, rel=1e-3)      # a 50 kHz stack settles within 1 ms

@@ -54,12 +54,11 @@ def joint_names(n_actuators: int) -> list[str]:
 
 def _check_range(values: np.ndarray, low: float, high: float, what: str, unit: str) -> None:
     """Refuse non-finite values and values outside [low, high] (one example named)."""
-    inside = (values >= low) & (values <= high)            # False for NaN too: one pass when all is well
-    if inside.all():
+    if values.size == 0 or (values.min() >= low and values.max() <= high):   # a NaN fails both: checked below
         return
     if not np.all(np.isfinite(values)):
         raise CommandRejected(f'{what}: non-finite value')
-    bad = float(values[~inside].flat[0])
+    bad = float(values[(values < low) | (values > high)].flat[0])
     raise CommandRejected(f'{what} {bad:g} {unit} outside [{low:g}, {high:g}] {unit}')
 
 
@@ -146,15 +145,17 @@ def _checked(stamp: float, names: list[str], n_points: int, knots: Callable[[lis
     if n_points > MAX_POINTS:
         raise CommandRejected(f'trajectory: {n_points} points, more than {MAX_POINTS}: send long strokes '
                               'in windows (each replaces the schedule from its start on), as the actuator does')
-    unknown = [n for n in names if n not in joints]
+    column = {name: i for i, name in enumerate(names)}
+    known = set(joints)
+    unknown = [n for n in names if n not in known]
     if unknown:
         raise CommandRejected(f'trajectory: unknown joint names {unknown} (known: {list(joints)})')
-    if len(set(names)) != len(names):
+    if len(column) != len(names):
         raise CommandRejected(f'trajectory: repeated joint names in {names}')
-    missing = [n for n in joints if n not in names]
+    missing = [n for n in joints if n not in column]
     if missing:
         raise CommandRejected(f'trajectory: joints {missing} missing (every joint must be commanded)')
-    offsets, positions, velocities, accelerations = knots([names.index(n) for n in joints])
+    offsets, positions, velocities, accelerations = knots([column[n] for n in joints])
     if offsets[0] < 0 or np.any(np.diff(offsets) <= 0):
         bad = int(np.argmax(offsets < 0)) if offsets[0] < 0 else int(np.argmax(np.diff(offsets) <= 0)) + 1
         raise CommandRejected(f'trajectory: time_from_start must be >= 0 and strictly increasing, got '

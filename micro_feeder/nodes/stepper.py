@@ -19,11 +19,8 @@ from ..physics.contact import ContactModel, ContactParams
 from ..physics.dynamics import EventList, FeederModel, Observation
 from ..physics.particle import ParticleParams
 from ..physics.trajectory import CommandLimits, check_table
-from ..physics.waveforms import StrokeSchedule, StrokeTable, trajectory_table
+from ..physics.waveforms import StrokeSchedule, trajectory_table
 from .commands import CommandRejected, TrajectoryCommand, start_time
-
-# Prune the schedule's past pieces when it holds more than this many.
-_MAX_PIECES = 8
 
 
 @functools.lru_cache(maxsize=4)
@@ -101,7 +98,7 @@ class Stepper:
                                                      cmd.accelerations)
             reason = check_table(table, CommandLimits(*self.limits))
             if reason is not None:
-                self.schedule = _schedule_of(before)
+                self.schedule = StrokeSchedule.of_pieces(before)
                 raise CommandRejected(f'trajectory: {reason}')
         self._prune()
         return t0
@@ -114,18 +111,4 @@ class Stepper:
 
     def _prune(self) -> None:
         """Drop schedule pieces that ended before now (they no longer affect anything)."""
-        pieces = self.schedule.pieces
-        if len(pieces) <= _MAX_PIECES:
-            return
-        now = self.state.t
-        current = max((i for i, (t, _) in enumerate(pieces) if t <= now), default=0)
-        self.schedule = _schedule_of(pieces[current:])
-
-
-def _schedule_of(pieces: list[tuple[float, StrokeTable]]) -> StrokeSchedule:
-    """A schedule made of ``pieces`` ((time from which it applies, table), in increasing time)."""
-    schedule = StrokeSchedule(pieces[0][1], pieces[0][0])
-    for t, table in pieces[1:]:
-        schedule.replace_from(t, table)
-    return schedule
-
+        self.schedule.drop_ended(self.state.t)

@@ -103,7 +103,13 @@ def decode(data: bytes, max_points: int) -> Decoded | None:
     end = p + pad + n_points * dtype.itemsize
     if n == 0 or not 0 <= len(body) - end < 8:         # rclpy pads the payload's end
         return Decoded(stamp, names, n_points, None)
-    records = np.frombuffer(bytes(body[p:p + 4]) + bytes(body[p + 4 + pad:end]), dtype=dtype)
+    if pad:                       # the first point is split by the padding: join it, then the rest as they are
+        records = np.empty(n_points, dtype=dtype)
+        records[:1] = np.frombuffer(bytes(body[p:p + 4]) + bytes(body[p + 4 + pad:p + pad + dtype.itemsize]),
+                                    dtype=dtype)
+        records[1:] = np.frombuffer(body[p + pad + dtype.itemsize:end], dtype=dtype)
+    else:                         # a read-only view of the message's bytes, not a copy
+        records = np.frombuffer(body[p:end], dtype=dtype)
     fixed = (np.all(records['n_pos'] == n) and np.all(records['n_vel'] == n) and np.all(records['n_acc'] == n)
              and not np.any(records['n_effort']))
     return Decoded(stamp, names, n_points, records if fixed else None)

@@ -443,6 +443,19 @@ class StrokeSchedule:
         """(3, n_channels) s, ṡ, s̈ at ``t`` from the table in force."""
         return self.table_at(t).evaluate(t)
 
+    @classmethod
+    def of_pieces(cls, pieces: Sequence[tuple[float, StrokeTable]]) -> StrokeSchedule:
+        """A schedule made of ``pieces`` ((time from which it applies, table), in increasing time)."""
+        schedule = cls(pieces[0][1], pieces[0][0])
+        schedule._pieces = list(pieces)
+        return schedule
+
+    def drop_ended(self, t: float) -> None:
+        """Forget the pieces that ended at or before ``t``: they no longer affect anything from ``t`` on (a
+        streamed burst adds one a window, and every lookup walks them)."""
+        current = max((i for i, (t_from, _) in enumerate(self._pieces) if t_from <= t), default=0)
+        del self._pieces[:current]
+
     def replace_from(self, t_start: float, table: StrokeTable) -> None:
         """Use ``table`` from ``t_start`` on, dropping whatever was scheduled at or after that time."""
         self._pieces = [(t, tab) for t, tab in self._pieces if t < t_start] + [(t_start, table)]
