@@ -22,6 +22,8 @@ from __future__ import annotations
 import argparse
 import time
 
+from bench_soak import CASES, wave_settings
+
 from micro_feeder.nodes import messages, trajectory_cdr
 from micro_feeder.nodes.actuator import StrokeStream
 from micro_feeder.nodes.commands import joint_names, parse_trajectory_cdr
@@ -29,21 +31,15 @@ from micro_feeder.nodes.stepper import Stepper, build_model
 from micro_feeder.nodes.transitions import TransitionEncoder
 from micro_feeder.physics.waveforms import StrokeParams
 
-BUDGET_US = {1: 250.0, 16: 350.0, 64: 500.0}    # µs per 1 ms tick: bench_soak's CPU targets
 TICK, LEAD, WINDOW = 1e-3, 0.2, 0.02             # s
-
-
-def settings(n: int) -> dict:
-    """bench_soak's travelling wave: n actuators 1 mm apart, phases (k mod 4)/4."""
-    return {'surface.centers': [k * 1e-3 for k in range(n)], 'surface.widths': [1e-3] * n,
-            'stroke.phases': [(k % 4) / 4 for k in range(n)]}
+BUDGET_US = {n: cpu_percent * TICK * 1e4 for n, (_minutes, cpu_percent) in CASES.items()}   # µs per tick
 
 
 class Feeder:
     """A stepper fed by a stroke stream, as the simulator is by the actuator."""
 
     def __init__(self, n: int):
-        flat = settings(n)
+        flat = wave_settings(n)
         self.stepper = Stepper(build_model(flat))
         self.stream = StrokeStream(StrokeParams.from_flat({**flat, 'stroke.count': 1}), 0, n, 0, window=WINDOW,
                                    max_points=2000, knots_per_stroke=0)

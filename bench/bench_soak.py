@@ -59,12 +59,15 @@ def rss_mb(pid: int) -> float:
     return float('nan')
 
 
+def wave_settings(n: int) -> dict[str, list[float]]:
+    """The settings of an n-actuator travelling wave (1 mm apart, phases (k mod 4)/4)."""
+    return {'surface.centers': [round(k * 1e-3, 6) for k in range(n)], 'surface.widths': [1e-3] * n,
+            'stroke.phases': [(k % 4) / 4 for k in range(n)]}
+
+
 def feeder_args(n: int) -> list[str]:
-    """--ros-args parameters of an n-actuator travelling wave (1 mm apart, phases (k mod 4)/4)."""
-    centers = [round(k * 1e-3, 6) for k in range(n)]
-    phases = [(k % 4) / 4 for k in range(n)]
-    return ['-p', f'surface.centers:={centers}', '-p', f'surface.widths:={[1e-3] * n}',
-            '-p', f'stroke.phases:={phases}']
+    """--ros-args parameters of :func:`wave_settings`."""
+    return [arg for name, value in wave_settings(n).items() for arg in ('-p', f'{name}:={value}')]
 
 
 def slope_per_minute(t: list[float], y: list[float]) -> float:

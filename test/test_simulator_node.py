@@ -411,9 +411,10 @@ def test_stepped_runs_are_bit_identical() -> None:
 
 @pytest.mark.parametrize('rtf', [0.0, 1.0])
 def test_stop_at_ends_exactly_at_the_requested_sim_time(ros_context: Context, rtf: float) -> None:
-    rig = Rig(ros_context, real_time_factor=rtf)
-    try:
+    rig = Rig(ros_context, real_time_factor=rtf, start_paused=True)   # as fast as possible passes 0.05 s in
+    try:                                                                # ~10 ms: set the end before it runs
         end = rig.sim.stop_at(0.05)
+        assert rig.probe.pause(rig.executor, False).success
         rig.wait(end.done, 'stop_at future completed')
         time.sleep(0.05)     # the loop thread keeps ticking: sim time must stay at the end
         assert end.result() == rig.sim.stepper.t == 0.05

@@ -118,19 +118,21 @@ def test_trajectory_hermite_through_knots(kind):
 
 
 def test_schedule_forgets_only_the_pieces_that_ended():
-    schedule = StrokeSchedule(table())
+    schedule = StrokeSchedule(table(), 1e-4)
     for t in (3e-4, 5e-4, 7e-4):
-        schedule.command_trajectory(t, [t + 1e-4], [[1e5 * t * 1e-5]], [[0.0]], [[0.0]])
+        schedule.command_trajectory(t, [t + 1e-4], [[t / 10]], [[0.0]], [[0.0]])
     times = np.linspace(0.0, 1e-3, 41)
     before = [schedule.evaluate(t).tolist() for t in times]
+    copy = StrokeSchedule.of_pieces(schedule.pieces)
+    schedule.drop_ended(0.5e-4)                     # every piece starts later: nothing ended
     schedule.drop_ended(2e-4)                       # the first piece is still in force
     assert len(schedule.pieces) == 4
     schedule.drop_ended(5e-4)                       # from 5e-4 on, the pieces before it no longer count
     assert [t for t, _ in schedule.pieces] == [5e-4, 7e-4]
     assert [schedule.evaluate(t).tolist() for t in times[times >= 5e-4]] == \
         [b for t, b in zip(times, before, strict=True) if t >= 5e-4]
-    copy = StrokeSchedule.of_pieces(schedule.pieces)
-    assert copy.pieces == schedule.pieces and copy is not schedule
+    assert [t for t, _ in copy.pieces] == [1e-4, 3e-4, 5e-4, 7e-4]     # a schedule of its own
+    assert [copy.evaluate(t).tolist() for t in times] == before
 
 
 def test_schedule_replaces_the_rest_and_stays_continuous():

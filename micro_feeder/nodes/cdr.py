@@ -12,9 +12,9 @@ import struct
 ENCAPSULATION = b'\x00\x01\x00\x00'       # CDR, little endian
 
 
-def align(buf: bytearray, size: int = 4) -> None:
-    """Pad the payload ``buf`` (without the encapsulation header) to a multiple of ``size`` bytes."""
-    buf += b'\0' * (-len(buf) % size)
+def align(buf: bytearray) -> None:
+    """Pad the payload ``buf`` (without the encapsulation header) to a multiple of 4 bytes."""
+    buf += b'\0' * (-len(buf) % 4)
 
 
 def put_uint32(buf: bytearray, value: int) -> None:

@@ -23,7 +23,6 @@ acknowledged on ``~/command_receipts`` with the sim time it was received at.
 from __future__ import annotations
 
 import math
-import struct
 import sys
 import threading
 import time
@@ -95,15 +94,6 @@ CDR_PARSE_BYTES = 8192
 
 class Busy(Exception):
     """The simulator's lock could not be taken in time: a tick (or a large command) is still working."""
-
-
-def _header_stamp(data: bytes) -> float:
-    """``header.stamp`` (s) of a serialized message that starts with a Header (CDR, either byte order),
-    read without deserializing the rest; 0 when the bytes are too short (the parse will refuse them)."""
-    if len(data) < 12:
-        return 0.0
-    sec, nanosec = struct.unpack_from('<iI' if data[1] == 1 else '>iI', data, 4)
-    return sec + nanosec * 1e-9
 
 
 class Simulator(Node):
@@ -356,7 +346,7 @@ class Simulator(Node):
     def _on_command(self, topic: str, data: bytes) -> None:
         """Subscription callback (executor thread): queue the serialized message; the intake does the rest."""
         self.commands.received += 1
-        stamp = _header_stamp(data) if topic == 'actuator/trajectory' else 0.0
+        stamp = messages.header_stamp(data) if topic == 'actuator/trajectory' else 0.0
         self._intake.submit(Received(topic, data, stamp))
 
     def _parse(self, received: Received) -> tuple[str, Any]:

@@ -110,5 +110,5 @@ class Stepper:
         self._prune()
 
     def _prune(self) -> None:
-        """Drop schedule pieces that ended before now (they no longer affect anything)."""
+        """Drop the schedule pieces that ended at or before now (they no longer affect anything)."""
         self.schedule.drop_ended(self.state.t)

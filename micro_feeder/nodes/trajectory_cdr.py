@@ -60,8 +60,9 @@ def encode(names: Sequence[str], offsets_ns: np.ndarray, positions: np.ndarray, 
 
 @dataclass(frozen=True)
 class Decoded:
-    """A JointTrajectory read from CDR: stamp (s), joint names, point count; ``records`` (structured
-    array of :func:`_record`) when the points have the fixed layout, else None."""
+    """A JointTrajectory read from CDR: stamp (s), joint names, point count; ``records`` (read-only structured
+    array of :func:`_record`, often a view of the message's bytes) when the points have the fixed layout,
+    else None."""
 
     stamp: float
     names: list[str]
@@ -108,8 +109,9 @@ def decode(data: bytes, max_points: int) -> Decoded | None:
         records[:1] = np.frombuffer(bytes(body[p:p + 4]) + bytes(body[p + 4 + pad:p + pad + dtype.itemsize]),
                                     dtype=dtype)
         records[1:] = np.frombuffer(body[p + pad + dtype.itemsize:end], dtype=dtype)
-    else:                         # a read-only view of the message's bytes, not a copy
+    else:                         # a view of the message's bytes, not a copy
         records = np.frombuffer(body[p:end], dtype=dtype)
+    records.flags.writeable = False   # read-only either way, whatever the names' lengths made the padding
     fixed = (np.all(records['n_pos'] == n) and np.all(records['n_vel'] == n) and np.all(records['n_acc'] == n)
              and not np.any(records['n_effort']))
     return Decoded(stamp, names, n_points, records if fixed else None)

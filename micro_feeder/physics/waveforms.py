@@ -428,11 +428,13 @@ class StrokeSchedule:
 
     @property
     def pieces(self) -> list[tuple[float, StrokeTable]]:
-        """(time from which it applies, table), in increasing time."""
+        """(time from which it applies, table), in increasing time (after :meth:`drop_ended`, only from the
+        piece in force at that time on)."""
         return list(self._pieces)
 
     def table_at(self, t: float) -> StrokeTable:
-        """The table in force at time ``t``."""
+        """The table in force at time ``t`` (the first piece's for a time before it, e.g. before a time given
+        to :meth:`drop_ended`)."""
         table = self._pieces[0][1]
         for t_from, candidate in self._pieces:
             if t_from <= t:

@@ -440,9 +440,11 @@ class _KernelWork:
     """The kernel's work arrays for one state size and channel count (what ``kernel.advance`` and
     ``kernel.observe`` take as ``ev_i``, ``ev_f``, ``scratch``, ``st``, ``aux``, ``cur``, ``dy``, ``rec``).
 
-    The kernel writes every entry it reads (``aux``'s load-table index is only where a search starts), so
-    they are kept between calls instead of allocated for each: the simulator node advances 1 ms a tick, and
-    allocating them per call took a fifth of the tick's Python time."""
+    No kernel call depends on what an earlier one left in them: it writes every entry before reading it,
+    except ``aux``'s load-table index (only where a search starts) and the ``st`` columns outside the felt
+    range (left stale and never read). So they are kept between calls instead of allocated for each: the
+    simulator node advances 1 ms a tick, and allocating them per call took a fifth of the tick's Python time.
+    Callers copy what they keep (events, recorded rows)."""
 
     def __init__(self, n_y: int, n_channels: int):
         self.ev_i = np.zeros((1024, 3), dtype=np.int64)
@@ -470,6 +472,7 @@ class _ThreadWork(threading.local):
         self._by_size: dict[tuple[int, int], _KernelWork] = {}
 
     def arrays(self, n_y: int, n_channels: int) -> _KernelWork:
+        """This thread's work arrays for a state of ``n_y`` entries and ``n_channels`` stroke channels."""
         work = self._by_size.get((n_y, n_channels))
         if work is None:
             work = self._by_size[(n_y, n_channels)] = _KernelWork(n_y, n_channels)
