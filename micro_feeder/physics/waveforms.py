@@ -19,6 +19,7 @@ separated by ``pause`` seconds; the burst starts after ``delay``; actuator k is 
 
 from __future__ import annotations
 
+import bisect
 import itertools
 import math
 from collections.abc import Sequence
@@ -435,11 +436,11 @@ class StrokeSchedule:
     def table_at(self, t: float) -> StrokeTable:
         """The table in force at time ``t`` (the first piece's for a time before it, e.g. before a time given
         to :meth:`drop_ended`)."""
-        table = self._pieces[0][1]
-        for t_from, candidate in self._pieces:
-            if t_from <= t:
-                table = candidate
-        return table
+        return self._pieces[self._index_at(t)][1]
+
+    def _index_at(self, t: float) -> int:
+        """Index of the piece in force at ``t``: the last one starting at or before it (0 if none does)."""
+        return max(bisect.bisect_right(self._pieces, t, key=lambda piece: piece[0]) - 1, 0)
 
     def evaluate(self, t: float) -> np.ndarray:
         """(3, n_channels) s, ṡ, s̈ at ``t`` from the table in force."""
@@ -455,8 +456,7 @@ class StrokeSchedule:
     def drop_ended(self, t: float) -> None:
         """Forget the pieces that ended at or before ``t``: they no longer affect anything from ``t`` on (a
         streamed burst adds one a window, and every lookup walks them)."""
-        current = max((i for i, (t_from, _) in enumerate(self._pieces) if t_from <= t), default=0)
-        del self._pieces[:current]
+        del self._pieces[:self._index_at(t)]
 
     def replace_from(self, t_start: float, table: StrokeTable) -> None:
         """Use ``table`` from ``t_start`` on, dropping whatever was scheduled at or after that time."""
