@@ -46,3 +46,15 @@ def test_serialized_state_equals_the_observation(n_actuators):
         assert (wrench.wrench.force.x, wrench.wrench.force.z) == (obs.friction, obs.normal_load)
         assert list(joints.name) == names and list(joints.effort) == []
         assert list(joints.position) == list(obs.strokes) and list(joints.velocity) == list(velocities)
+
+
+def test_a_run_of_the_wrong_length_is_refused():
+    model = FeederModel()
+    model = model.replace(surface=model.surface.replace(centers=(0.0, 1e-3), widths=(1e-3, 1e-3)),
+                          stroke=model.stroke.replace(phases=(0.0, 0.5)))
+    state_messages = StateMessages(['joint_0', 'joint_1'])
+    obs = model.observe(model.initial_state())
+    with pytest.raises(ValueError, match='1 values for a run of 2'):
+        state_messages.update(obs, np.zeros(1))           # would otherwise broadcast silently
+    with pytest.raises(ValueError, match='3 values for a run of 2'):
+        state_messages.update(obs, np.zeros(3))

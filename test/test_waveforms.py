@@ -1,5 +1,7 @@
 """Stroke waveforms and trajectories: exact derivatives against independent numerics, conventions."""
 
+import math
+
 import numpy as np
 import pytest
 from scipy.integrate import quad
@@ -133,6 +135,28 @@ def test_schedule_forgets_only_the_pieces_that_ended():
         [b for t, b in zip(times, before, strict=True) if t >= 5e-4]
     assert [t for t, _ in copy.pieces] == [1e-4, 3e-4, 5e-4, 7e-4]     # a schedule of its own
     assert [copy.evaluate(t).tolist() for t in times] == before
+
+
+def test_schedule_spans_are_the_pieces_in_force_during_an_interval():
+    schedule = StrokeSchedule(table(), 1e-4)
+    for t in (3e-4, 5e-4):
+        schedule.command_trajectory(t, [t + 1e-4], [[t / 10]], [[0.0]], [[0.0]])
+    (t0, first), (t1, second), (t2, third) = schedule.pieces
+
+    def spans(a: float, b: float) -> list[tuple[float, float, object]]:
+        return schedule.spans(a, b)
+
+    assert spans(2e-4, 4e-4) == [(t0, t1, first), (t1, t2, second)]
+    assert spans(3e-4, 4e-4) == [(t1, t2, second)]            # the first ended where the interval starts
+    assert spans(2e-4, 3e-4) == [(t0, t1, first)]             # the interval ends where the second starts
+    assert spans(0.0, 1e-3) == [(t0, t1, first), (t1, t2, second), (t2, math.inf, third)]
+    assert spans(6e-4, 7e-4) == [(t2, math.inf, third)]
+    # the walk it replaces: every piece whose [from, until) meets (a, b]
+    bounds = [t0, t1, t2, math.inf]
+    for a, b in ((0.0, 1e-4), (1e-4, 3e-4), (2.9e-4, 5.1e-4), (5e-4, 5e-4 + 1e-9)):
+        expected = [(bounds[i], bounds[i + 1], tab) for i, (_, tab) in enumerate(schedule.pieces)
+                    if bounds[i + 1] > a and bounds[i] < b]
+        assert spans(a, b) == expected
 
 
 def test_schedule_replaces_the_rest_and_stays_continuous():

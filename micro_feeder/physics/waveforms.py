@@ -442,6 +442,21 @@ class StrokeSchedule:
         """Index of the piece in force at ``t``: the last one starting at or before it (0 if none does)."""
         return max(bisect.bisect_right(self._pieces, t, key=lambda piece: piece[0]) - 1, 0)
 
+    def spans(self, t0: float, t1: float) -> list[tuple[float, float, StrokeTable]]:
+        """(from, until, table) of each piece in force during (t0, t1], in time order: a piece applies on
+        [from, until), ``until`` being the next piece's start (inf for the last). Found by bisection: the
+        simulator asks every 1 ms tick."""
+        pieces = self._pieces
+        out = []
+        for i in range(self._index_at(t0), len(pieces)):
+            t_from, table = pieces[i]
+            if t_from >= t1:
+                break
+            t_until = pieces[i + 1][0] if i + 1 < len(pieces) else math.inf
+            if t_until > t0:
+                out.append((t_from, t_until, table))
+        return out
+
     def evaluate(self, t: float) -> np.ndarray:
         """(3, n_channels) s, ṡ, s̈ at ``t`` from the table in force."""
         return self.table_at(t).evaluate(t)
