@@ -3,14 +3,18 @@ deserializes must be exactly the observation, tick after tick, for any number of
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
-from rclpy.serialization import deserialize_message
+from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
+from visualization_msgs.msg import Marker, MarkerArray
 
-from micro_feeder.nodes.messages import StateMessages, seconds, tilt_quaternion
+from micro_feeder.nodes.messages import StateMessages, SurfaceMarkers, header_bytes, seconds, tilt_quaternion, to_time
 from micro_feeder.physics.dynamics import FeederModel
 
 
@@ -58,3 +62,46 @@ def test_a_run_of_the_wrong_length_is_refused():
         state_messages.update(obs, np.zeros(1))           # would otherwise broadcast silently
     with pytest.raises(ValueError, match='3 values for a run of 2'):
         state_messages.update(obs, np.zeros(3))
+
+
+@pytest.mark.parametrize('n_actuators', [1, 5])
+def test_serialized_markers_draw_the_surface_and_the_part(n_actuators):
+    centers = tuple(1e-3 * k for k in range(n_actuators))
+    widths = tuple(1e-3 * (1 + k / 10) for k in range(n_actuators))
+    model = FeederModel()
+    model = model.replace(surface=model.surface.replace(centers=centers, widths=widths),
+                          stroke=model.stroke.replace(phases=tuple(k / n_actuators for k in range(n_actuators))))
+    xs = np.linspace(-4e-3, 1e-2, 50)
+    markers = SurfaceMarkers(xs, centers, widths, 1e-4)
+    state = model.initial_state()
+    modes = set()
+    for t in (2e-4, 4.5e-4, 7e-4, 1.3e-3, 3.000000001):
+        model.advance(state, t)
+        obs = model.observe(state)
+        stamp = to_time(obs.t)
+        got = deserialize_message(markers.update(obs, stamp), MarkerArray)
+        modes.add(obs.mode)
+        line, part = got.markers
+        for marker in (line, part):
+            assert (marker.header.stamp.sec, marker.header.stamp.nanosec) == (stamp.sec, stamp.nanosec)
+            assert (marker.header.frame_id, marker.ns, marker.action) == ('feeder', 'micro_feeder', Marker.ADD)
+        assert (line.id, line.type, part.id, part.type) == (0, Marker.LINE_STRIP, 1, Marker.SPHERE)
+        # the surface: the sum of the Gaussian bumps, evaluated here independently
+        expected = [sum(s * math.exp(-0.5 * ((x - c) / w) ** 2)
+                        for s, c, w in zip(obs.strokes, centers, widths, strict=True)) for x in xs]
+        assert [p.x for p in line.points] == list(xs) and {p.y for p in line.points} == {0.0}
+        np.testing.assert_allclose([p.z for p in line.points], expected, rtol=1e-12, atol=1e-18)
+        position = part.pose.position
+        assert (position.x, position.y, position.z) == (obs.x, 0.0, obs.z + 0.5e-4)
+        assert part.scale.x == part.scale.y == part.scale.z == 1e-4
+        assert (part.color.r, part.color.g, part.color.b) == pytest.approx(
+            {'stuck': (0.2, 0.7, 0.2), 'sliding': (0.9, 0.6, 0.1)}.get(obs.mode, (0.9, 0.2, 0.2)))
+    assert modes == {'stuck', 'sliding'}       # both colours drawn
+
+
+@pytest.mark.parametrize('frame_id', ['', 'a', 'ab', 'abc', 'abcd', '/feeder1/actuator/command', 'µ-stage'])
+def test_header_bytes_are_what_rclpy_serializes(frame_id):
+    for t in (0.0, 1e-9, 0.0123456789, 3.9999999999, 12345.000000001):
+        expected = Header(stamp=to_time(t), frame_id=frame_id)
+        assert header_bytes(t, frame_id) == serialize_message(expected)
+        assert deserialize_message(header_bytes(t, frame_id), Header) == expected

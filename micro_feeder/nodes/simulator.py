@@ -421,7 +421,7 @@ class Simulator(Node):
 
     def _acknowledge(self, topic: str, t: float) -> None:
         """``~/command_receipts``: a command arrived on ``topic`` and was applied at sim time ``t`` (s)."""
-        self._pub_receipts.publish(Header(stamp=messages.to_time(t), frame_id=topic))
+        self._pub_receipts.publish(messages.header_bytes(t, topic))
 
     def _refuse(self, reason: str) -> None:
         self.commands.refused += 1
