@@ -18,6 +18,7 @@ from .layout import (
     AUX_H,
     AUX_HT,
     AUX_HX,
+    AUX_JET,
     AUX_L,
     AUX_LOAD_INDEX,
     AUX_N,
@@ -141,13 +142,18 @@ def stroke_into(st: np.ndarray, k: int, src: tuple, cur: np.ndarray, t: float) -
 @jit_inline
 def contact_load(x: float, xd: float, st: np.ndarray, base_acc: float, model: KernelModel,
                  aux: np.ndarray) -> None:
-    """Normal load N, required friction T_req and Q_max(N) for a part on the surface at (x, ẋ).
+    """Normal load N, required friction T_req and Q_max(N) for a part on the surface at (x, ẋ); the surface's
+    derivatives there go to ``aux`` for :func:`margin_slopes` (one pass over the bumps serves both).
 
     N = m (h_tt + 2 h_xt ẋ + h_xx ẋ² + g − h_x a_b) / L, T_req = N h_x + m L a_b (a_b: base
     acceleration, 0 except in the flat-surface check), and ẍ = (T − T_req) / (m L).
     """
     m = model.mass
-    h, hx, hxx, ht, htt, hxt = surface_here(x, st, model, aux)
+    first, stop = felt(model, aux)
+    h, hx, hxx, ht, htt, hxt, httt, httx, hxxt, hxxx = surface_jet(
+        x, st[0], st[1], st[2], st[3], model.centers, model.widths, model.cutoff_radius, first, stop)
+    aux[AUX_JET], aux[AUX_JET + 1], aux[AUX_JET + 2], aux[AUX_JET + 3] = hxx, htt, hxt, httt
+    aux[AUX_JET + 4], aux[AUX_JET + 5], aux[AUX_JET + 6] = httx, hxxt, hxxx
     length = math.sqrt(1.0 + hx * hx)
     normal_acc = htt + model.gravity - hx * base_acc
     if model.convective:
@@ -227,7 +233,8 @@ def margin_slopes(mode: int, direction: int, y: np.ndarray, dy: np.ndarray, mode
     """Time derivatives (per second) of the two margins :func:`evaluate` just returned at (t, y) along the
     motion ``dy`` it computed (``st`` and ``aux`` as it left them): stick (or slide) margin, adhesion margin.
 
-    In closed form from the strokes' s⃛ and the bump's derivatives (:func:`surface_jet`): with a = ẍ,
+    In closed form from the strokes' s⃛ and the bump's derivatives (:func:`surface_jet`, which the evaluation
+    left in ``aux``): with a = ẍ,
     v = ẋ (0 when stuck), dN/dt = m (dA/dt · L − A · dL/dt) / L² for A = h_tt + 2 h_xt v + h_xx v² + g − h_x a_b,
     dL/dt = h_x (h_xt + h_xx v) / L; dT_req/dt = dN/dt h_x + N (h_xt + h_xx v) + m (dL/dt a_b + L da_b/dt);
     dQ_max/dt = the slope of the Q_max(N) table segment at N times dN/dt; the slide margin's is dir·a. NaN in
@@ -238,10 +245,8 @@ def margin_slopes(mode: int, direction: int, y: np.ndarray, dy: np.ndarray, mode
     m = model.mass
     v = y[1] if mode != STUCK else 0.0
     a = dy[1] if mode != STUCK else 0.0
-    first, stop = felt(model, aux)
-    (_h, hx, hxx, _ht, htt, hxt, httt, httx, hxxt,
-     hxxx) = surface_jet(y[0], st[0], st[1], st[2], st[3], model.centers, model.widths, model.cutoff_radius, first,
-                         stop)
+    hx, hxx, htt, hxt = aux[AUX_HX], aux[AUX_JET], aux[AUX_JET + 1], aux[AUX_JET + 2]
+    httt, httx, hxxt, hxxx = aux[AUX_JET + 3], aux[AUX_JET + 4], aux[AUX_JET + 5], aux[AUX_JET + 6]
     n_act = model.n_actuators
     base, base_rate = (st[2, n_act], st[3, n_act]) if model.has_base else (0.0, 0.0)
     hx_rate = hxt + hxx * v
