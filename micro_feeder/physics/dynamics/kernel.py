@@ -374,25 +374,3 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
     fs[FS_T] = t
     return status, n_ev, n_rec
 
-
-# The entry points Python calls. numba types a plain tuple's fields in C, a NamedTuple through Python: passing
-# the model as ``tuple(model)`` and rebuilding it here cut a call's dispatch from 2.6 µs to 0.7 µs (measured),
-# which the simulator node pays twice every 1 ms tick.
-
-@jit
-def advance_entry(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_target: float,
-                  t_limit: float, model_fields: tuple, src: tuple, ev_i: np.ndarray, ev_f: np.ndarray,
-                  rec: np.ndarray, n_rec: int, scratch: np.ndarray, st: np.ndarray, aux: np.ndarray,
-                  cur: np.ndarray) -> tuple[int, int, int]:
-    """:func:`advance` with the model given as the plain tuple of its :class:`KernelModel` fields."""
-    return advance(y, iv, fs, ahead, t_target, t_limit, KernelModel(*model_fields), src, ev_i, ev_f, rec, n_rec,
-                   scratch, st, aux, cur)
-
-
-@jit
-def observe_entry(t: float, y: np.ndarray, iv: np.ndarray, model_fields: tuple, src: tuple, cur: np.ndarray,
-                  st: np.ndarray, aux: np.ndarray, dy: np.ndarray, row: np.ndarray) -> None:
-    """:func:`observe` at ``t`` on the segments active there (``cur`` is pointed at them first), with the
-    model given as the plain tuple of its :class:`KernelModel` fields."""
-    locate_all(src, t, cur)
-    observe(t, y, iv, KernelModel(*model_fields), src, cur, st, aux, dy, row)

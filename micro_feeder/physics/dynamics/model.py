@@ -235,8 +235,7 @@ class FeederModel:
             centers=np.asarray(surface.centers, dtype=float), widths=np.asarray(surface.widths, dtype=float),
             n_actuators=int(surface.n_actuators))
         object.__setattr__(self, '_kernel_model', packed)
-        object.__setattr__(self, '_kernel_fields', tuple(packed))
-        object.__setattr__(self, '_recording_fields', tuple(packed._replace(record=True)))
+        object.__setattr__(self, '_recording_model', packed._replace(record=True))
 
     @classmethod
     def from_settings(cls, flat: Mapping[str, Any], **overrides: Any) -> FeederModel:
@@ -379,16 +378,16 @@ class FeederModel:
         table = source.table_at(state.t) if isinstance(source, StrokeSchedule) else source
         src = self._source_table(table).as_tuple()
         work = _WORK.arrays(state.y.size, src[0].size)
+        k.locate_all(src, state.t, work.cur)
         row = np.zeros((1, layout.N_FIXED_COLUMNS + self.n_actuators))
-        k.observe_entry(state.t, state.y, state.iv, self._kernel_fields, src, work.cur, work.st, work.aux, work.dy,
-                        row[0])
+        k.observe(state.t, state.y, state.iv, self._kernel_model, src, work.cur, work.st, work.aux, work.dy, row[0])
         return row, work.st
 
     def _integrate(self, state: FeederState, t_target: float,
                    source: StrokeTable | StrokeSchedule | None, record: bool
                    ) -> tuple[EventList, list[np.ndarray]]:
         self._check_state(state)
-        packed = self._recording_fields if record else self._kernel_fields
+        packed = self._recording_model if record else self._kernel_model
         events: list[EventList] = []
         recorded: list[np.ndarray] = []
         for t_until, t_limit, table in self._segments(state.t, t_target, source):
@@ -401,8 +400,8 @@ class FeederModel:
                 state.fs[layout.FS_AHEAD_T1] = math.nan      # taken on another model or source: not valid
             state.ahead_on = (self, table, t_limit)
             while state.t < t_until:
-                status, n_ev, n_rec = k.advance_entry(state.y, state.iv, state.fs, state.ahead, t_until, t_limit,
-                                                      packed, src, ev_i, ev_f, rec, 0, scratch, st, aux, cur)
+                status, n_ev, n_rec = k.advance(state.y, state.iv, state.fs, state.ahead, t_until, t_limit,
+                                                packed, src, ev_i, ev_f, rec, 0, scratch, st, aux, cur)
                 if n_ev:
                     events.append(EventList(ev_i[:n_ev].copy(), ev_f[:n_ev].copy()))
                 if record and n_rec:
