@@ -7,15 +7,7 @@ import pytest
 from scipy.integrate import quad
 
 from micro_feeder.physics.parameters import ParameterError
-from micro_feeder.physics.waveforms import (
-    WAVEFORMS,
-    StrokeParams,
-    StrokeSchedule,
-    locate_segment,
-    segment_end,
-    trajectory_table,
-    waveform_table,
-)
+from micro_feeder.physics.waveforms import WAVEFORMS, StrokeParams, StrokeSchedule, trajectory_table, waveform_table
 
 F = 800.0
 A = 80e-6
@@ -180,29 +172,3 @@ def test_schedule_replaces_the_rest_and_stays_continuous():
     assert schedule.table_at(5e-4) is schedule.pieces[1][1]
     held = schedule.hold_from(8.5e-4).evaluate(1.0)[0, 0]
     assert held == pytest.approx(5e-5)
-
-
-@pytest.mark.parametrize('which', ['burst of 5 trapezoids', 'streamed knots'])
-def test_a_segment_hint_never_changes_which_segment_is_found(which):
-    if which == 'burst of 5 trapezoids':
-        tab = waveform_table(StrokeParams(frequency=F, amplitude=A, count=5, waveform='trapezoid'), 1)
-    else:
-        times = np.cumsum(np.full(40, 43.5e-6)) + 1e-3
-        positions = 1e-5 * np.sin(2e3 * times)[:, None]
-        tab = trajectory_table(times, positions, 2e-2 * np.cos(2e3 * times)[:, None],
-                               -40.0 * np.sin(2e3 * times)[:, None])
-    src = tab.as_tuple()
-    n = int(tab.n_seg[0])
-    # every breakpoint exactly as the integrator computes it, a hair either side, and times in between
-    ends = {segment_end(src, 0, j, i) for j in range(int(tab.count[0])) for i in range(n)}
-    ends |= {t0 + d for t0 in ends for d in (-1e-15, 1e-15)}
-    rng = np.random.default_rng(3)
-    times = sorted(ends | set(rng.uniform(tab.start[0] - 1e-4, tab.end_time() + 1e-4, 300).tolist()))
-    checked = 0
-    for t in times:
-        expected = locate_segment(src, 0, t)
-        for hint in {-1, 0, 1, n - 2, n - 1, n, n + 7, expected[1] - 1, expected[1], expected[1] + 1,
-                     int(rng.integers(0, n))}:
-            assert locate_segment(src, 0, t, hint) == expected, (t, hint)
-            checked += 1
-    assert checked > 2000

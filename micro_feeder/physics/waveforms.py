@@ -129,15 +129,11 @@ def stack_tables(tables: Sequence[StrokeTable]) -> StrokeTable:
 # Kernel-side evaluation (compiled)
 
 @jit
-def locate_segment(src: tuple, k: int, t: float, hint: int = -1) -> tuple[int, int]:
+def locate_segment(src: tuple, k: int, t: float) -> tuple[int, int]:
     """(period index j, segment index i) active at time ``t`` on channel ``k`` (right-continuous).
 
     j = -1: before the pattern starts; j = -2: after it ends. A time exactly on a boundary belongs to
     the segment that starts there, so a step that ended on a breakpoint continues on the next segment.
-    ``hint``: a segment index to try first, and the one after it (the integrator's cursor: a step that
-    ended on a breakpoint goes on in the next segment); the answer is the same as without it, found
-    without bisecting when the hint is right (a streamed trajectory has a breakpoint at every knot, for
-    every channel at once).
     """
     start, period, count, _, _, seg_start, _, n_seg = src
     if t < start[k]:
@@ -147,12 +143,7 @@ def locate_segment(src: tuple, k: int, t: float, hint: int = -1) -> tuple[int, i
     j = min(max(int((t - start[k]) // period[k]), 0), int(count[k]) - 1)
     tau = t - (start[k] + j * period[k])
     n = n_seg[k]
-    if hint >= 0 and hint + 1 < n and seg_start[k, hint + 1] <= tau < seg_start[k, hint + 2]:
-        i = hint + 1            # (what the bisection below finds: the last start at or before tau)
-    elif 0 <= hint < n and seg_start[k, hint] <= tau < seg_start[k, hint + 1]:
-        i = hint
-    else:
-        i = min(max(int(np.searchsorted(seg_start[k, :n + 1], tau, side='right')) - 1, 0), n - 1)
+    i = min(max(int(np.searchsorted(seg_start[k, :n + 1], tau, side='right')) - 1, 0), n - 1)
     while segment_end(src, k, j, i) <= t:     # rounding: the boundary computed as the integrator does
         i += 1
         if i == n:

@@ -274,12 +274,10 @@ def margin_slopes(mode: int, direction: int, y: np.ndarray, dy: np.ndarray, mode
 
 @jit
 def locate_all(src: tuple, t: float, cur: np.ndarray) -> float:
-    """Point ``cur`` at the segments active at ``t`` (right side), trying the segment it points at and the
-    next one first (whatever table it pointed into: the answer does not depend on it); return the next
-    breakpoint."""
+    """Point ``cur`` at the segments active at ``t`` (right side); return the next breakpoint."""
     t_next = math.inf
     for k in range(cur.shape[0]):
-        j, i = locate_segment(src, k, t, cur[k, 1])
+        j, i = locate_segment(src, k, t)
         cur[k, 0] = j
         cur[k, 1] = i
         t_next = min(t_next, segment_end(src, k, j, i))
