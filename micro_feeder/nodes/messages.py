@@ -145,21 +145,26 @@ class SerializedTemplate:
 
 
 def _offset(template: bytes, pattern: bytes) -> int:
-    at = template.find(pattern)
-    if at < 0 or template.find(pattern, at + 1) >= 0:
+    found = _occurrences(template, pattern)
+    if len(found) != 1:
         raise ValueError('SerializedTemplate: a placeholder is not laid out contiguously, or not once')
-    return at
+    return found[0]
 
 
 def _offsets(template: bytes, pattern: bytes) -> list[int]:
     """Where ``pattern`` occurs in ``template`` (at least once: a message may share one stamp among headers)."""
+    found = _occurrences(template, pattern)
+    if not found:
+        raise ValueError('SerializedTemplate: the stamp placeholder is not in the message')
+    return found
+
+
+def _occurrences(template: bytes, pattern: bytes) -> list[int]:
     found = []
     at = template.find(pattern)
     while at >= 0:
         found.append(at)
         at = template.find(pattern, at + 1)
-    if not found:
-        raise ValueError('SerializedTemplate: the stamp placeholder is not in the message')
     return found
 
 

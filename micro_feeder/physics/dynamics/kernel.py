@@ -373,4 +373,3 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
         iv[IV_START_KNOWN] = 0
     fs[FS_T] = t
     return status, n_ev, n_rec
-
