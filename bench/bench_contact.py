@@ -5,6 +5,7 @@ Reports the first build in a fresh process (includes the one-off f(s) spline) an
 of repeated builds, for both presets.
 """
 
+import argparse
 import statistics
 import time
 
@@ -31,4 +32,5 @@ def main() -> None:
 
 
 if __name__ == '__main__':
+    argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()
     main()

@@ -14,6 +14,7 @@ the actuators near the part, phases included, so the part moves alike (the same 
 and 16 -> 64 shows what the actuators it does not feel cost.
 """
 
+import argparse
 import time
 
 from micro_feeder.physics.dynamics import FeederModel
@@ -71,4 +72,5 @@ def main() -> None:
     print(f'with a flight: cutoff 1e-12 {flight_speed(1e-12) / flight_speed(0.0):.1f}x faster than the full sum')
 
 if __name__ == '__main__':
+    argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter).parse_args()
     main()

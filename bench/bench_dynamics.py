@@ -16,6 +16,7 @@ Usage: .venv/bin/python bench/bench_dynamics.py [--skip-compile]
    installation pays once; later processes load the cache).
 """
 
+import argparse
 import os
 import subprocess
 import sys
@@ -94,13 +95,18 @@ def compile_time() -> None:
 
 
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0],
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument('--skip-compile', action='store_true',
+                        help='skip the fresh-process compile measurement (about 4 minutes on 2 cores)')
+    args = parser.parse_args()
     model = FeederModel()
     model.run()
     speed(model)
     sweep_time()
     accuracy(model)
     bench_cutoff.main()
-    if '--skip-compile' not in sys.argv:
+    if not args.skip_compile:
         compile_time()
 
 
