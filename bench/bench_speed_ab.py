@@ -57,8 +57,11 @@ def main() -> None:
     args = parser.parse_args()
     with tempfile.TemporaryDirectory(prefix='speed_ab_') as scratch:
         other = Path(scratch) / 'tree'
-        subprocess.run(['git', 'worktree', 'add', '--detach', str(other), args.against], cwd=ROOT, check=True,
-                       capture_output=True)
+        added = subprocess.run(['git', 'worktree', 'add', '--detach', str(other), args.against], cwd=ROOT,
+                               capture_output=True, text=True)
+        if added.returncode != 0:
+            sys.exit(f'cannot check out {args.against} beside {ROOT} (this needs a git clone that has it): '
+                     f'{added.stderr.strip()}')
         try:
             trees = {'this tree': (ROOT, dict(os.environ)),
                      args.against: (other, dict(os.environ, PYTHONPATH=str(other),
