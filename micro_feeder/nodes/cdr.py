@@ -10,6 +10,7 @@ from __future__ import annotations
 import struct
 
 ENCAPSULATION = b'\x00\x01\x00\x00'       # CDR, little endian
+STAMP = struct.Struct('<iI')               # a builtin_interfaces Time or Duration: int32 sec, uint32 nanosec
 
 
 def align(buf: bytearray) -> None:

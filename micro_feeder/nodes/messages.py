@@ -22,7 +22,7 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from ..physics.dynamics import Observation
 from ..physics.surface import surface_profile
-from .cdr import ENCAPSULATION, put_string
+from .cdr import ENCAPSULATION, STAMP, put_string
 
 FEEDER_FRAME = 'feeder'
 CONTACT_FRAME = 'contact'
@@ -62,7 +62,7 @@ def header_stamp(data: bytes) -> float:
 def header_bytes(t: float, frame_id: str) -> bytes:
     """A ``std_msgs/Header`` stamped at sim time ``t`` (s) with ``frame_id``, as CDR bytes: the simulator's
     command receipts, up to ~200 a second with 64 actuators streaming (an rclpy Header cost ~40 µs each)."""
-    return ENCAPSULATION + struct.pack('<iI', *stamp_parts(t)) + _string_bytes(frame_id)
+    return ENCAPSULATION + STAMP.pack(*stamp_parts(t)) + _string_bytes(frame_id)
 
 
 @functools.cache
@@ -118,7 +118,7 @@ class SerializedTemplate:
             first += length
         template = serialize_message(msg)
         self._buffer = bytearray(template)
-        self._stamps_at = _offsets(template, struct.pack('<iI', *STAMP_SENTINEL))
+        self._stamps_at = _offsets(template, STAMP.pack(*STAMP_SENTINEL))
         self._runs: list[tuple[int, struct.Struct]] = []
         first = 0
         for _, length in runs:
@@ -133,7 +133,7 @@ class SerializedTemplate:
         """The CDR bytes with the stamp (sec, nanosec) and each run's values (as many as in the template)."""
         buffer = self._buffer
         for at in self._stamps_at:
-            struct.pack_into('<iI', buffer, at, sec, nanosec)
+            STAMP.pack_into(buffer, at, sec, nanosec)
         for (at, layout), view, values in zip(self._runs, self._views, runs, strict=True):
             if isinstance(values, np.ndarray):      # one copy (unpacking 2 x 64 joints into struct took 10 µs)
                 if values.shape != view.shape:

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 from builtin_interfaces.msg import Time
 
-from .cdr import ENCAPSULATION, put_string, put_uint32
+from .cdr import ENCAPSULATION, STAMP, put_string, put_uint32
 
 
 def _record(n: int) -> np.dtype:
@@ -42,7 +42,7 @@ def encode(names: Sequence[str], offsets_ns: np.ndarray, positions: np.ndarray, 
     n_points, n = np.shape(positions)
     if not n:
         raise ValueError('trajectory_cdr.encode: at least one joint')
-    head = bytearray(struct.pack('<iI', stamp.sec, stamp.nanosec))
+    head = bytearray(STAMP.pack(stamp.sec, stamp.nanosec))
     put_string(head, '')                                                    # frame_id
     put_uint32(head, len(names))
     for name in names:

@@ -12,16 +12,13 @@ and letting ``publish`` serialize it cost ~60 µs, the largest share of the simu
 
 from __future__ import annotations
 
-import struct
-
 from diagnostic_msgs.msg import DiagnosticStatus
 
 from ..physics.dynamics import Event
-from .cdr import ENCAPSULATION, put_string, put_uint32
+from .cdr import ENCAPSULATION, STAMP, put_string, put_uint32
 from .messages import FEEDER_FRAME, stamp_parts
 
 TRANSITION_KINDS = ('stick_to_slip', 'slip_to_stick', 'take_off', 'landing')
-_STAMP = struct.Struct('<iI')
 
 
 class TransitionEncoder:
@@ -43,7 +40,7 @@ class TransitionEncoder:
         middle = self._middles.get(modes)
         if middle is None:
             middle = self._middles[modes] = self._middle(*modes)
-        payload = bytearray(_STAMP.pack(*stamp_parts(event.t)))
+        payload = bytearray(STAMP.pack(*stamp_parts(event.t)))
         payload += middle
         put_string(payload, repr(event.t))
         put_string(payload, 'x_m')
@@ -52,7 +49,7 @@ class TransitionEncoder:
 
     def _middle(self, kind: str, from_mode: str, to_mode: str) -> bytes:
         """The payload after the stamp (which is 8 bytes, so alignment carries over) up to the key ``t_s``."""
-        payload = bytearray(_STAMP.size)
+        payload = bytearray(STAMP.size)
         put_string(payload, FEEDER_FRAME)
         put_uint32(payload, 1)                                      # one status
         payload += DiagnosticStatus.OK                              # level: one byte
@@ -63,4 +60,4 @@ class TransitionEncoder:
             put_string(payload, key)
             put_string(payload, value)
         put_string(payload, 't_s')
-        return bytes(payload[_STAMP.size:])
+        return bytes(payload[STAMP.size:])
