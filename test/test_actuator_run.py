@@ -63,3 +63,29 @@ def test_continuous_strokes_in_run_are_the_offline_strokes(tmp_path: Path) -> No
     assert want['transitions']['stick_to_slip'] > 50, run.stdout + run.stderr
     assert float(moved.group(1)) * 1e-6 == pytest.approx(want['distance_m'], abs=1.5e-9)
     assert transitions.group(1) == ', '.join(f'{k} {v}' for k, v in want['transitions'].items())
+
+
+def test_a_recorded_run_starts_at_sim_time_zero_without_a_stall(tmp_path: Path) -> None:
+    """``run --record`` holds sim time at 0 until its actuator and recorder are there: the log's poses start
+    at t = 0, the burst is applied at t = 0 as offline, and no wall-clock gap over 50 ms separates two poses
+    (the command path is compiled before the loop runs, not under its lock in the first tick)."""
+    from micro_feeder.logs.reader import LogReader
+
+    log = tmp_path / 'run'
+    run = subprocess.run([*CLI, 'run', '--duration', '0.5', '--set', 'stroke.count=5', '--record', str(log)],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert 'started after' not in run.stderr, run.stderr
+    offline = subprocess.run([*CLI, 'simulate', '--json', '--out', str(tmp_path), '--set', 'stroke.count=5',
+                              '--duration', '0.5'], capture_output=True, text=True, timeout=120, check=True)
+    moved = re.search(r'moved ([-+0-9.]+) um', run.stdout)
+    assert moved and float(moved.group(1)) * 1e-6 == pytest.approx(json.loads(offline.stdout)['distance_m'],
+                                                                    abs=1.5e-9), run.stdout
+    reader = LogReader(log)
+    poses = [(m.stamp_ns, m.log_time_ns) for m in reader.messages(['particle/pose'], decoded=True)]
+    receipts = [m.stamp_ns for m in reader.messages(['simulator/command_receipts'], decoded=True)]
+    assert poses[0][0] <= 2_000_000, poses[:3]                     # the first tick's pose (or t = 0's)
+    assert receipts == [0], receipts                                # the burst reached the simulator at t = 0
+    running = [p for p in poses if p[0] > 0]                        # the held pose at t = 0 waits, by design
+    wall_gaps = [b[1] - a[1] for a, b in zip(running, running[1:])]
+    assert max(wall_gaps) < 50_000_000, max(wall_gaps)

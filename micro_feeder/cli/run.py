@@ -18,6 +18,7 @@ from ._foxglove import add_foxglove_option, live_view
 from ._session import add_namespace_option, namespace, ros_session, validate
 
 STATUS_PERIOD = 0.2   # s (wall clock) between two status line updates
+READY_TIMEOUT = 10.0  # s (wall clock) the run waits at t = 0 for its actuator and recorder
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -62,6 +63,29 @@ def summary(sim: Any, actuator: Any, wall_s: float, log: str | None) -> str:
     return '\n'.join(lines)
 
 
+def _wait_until_ready(session: Any, sim: Any, actuator: Any, whole_burst: bool) -> None:
+    """Spin (sim time held at 0) until the simulator hears the actuator, the recorder (if any) hears every
+    simulator topic and the actuator's command, and a whole burst has reached the simulator; at most
+    :data:`READY_TIMEOUT` s of wall time, then start anyway and say what is missing."""
+    recording = session.recorder is not None
+
+    def missing() -> list[str]:
+        out = []
+        if actuator.trajectory_subscribers() < 1 + recording:
+            out.append('the simulator' + (' and the recorder' if recording else '') + ' on actuator/trajectory')
+        if recording and not sim.outputs_matched():
+            out.append('the recorder on the simulator\'s topics')
+        if whole_burst and sim.commands.received < 1:
+            out.append('the actuator\'s burst at the simulator')
+        return out
+
+    deadline = time.monotonic() + READY_TIMEOUT
+    session.spin(lambda: not missing() or time.monotonic() > deadline)
+    if missing() and not session.stop:
+        print(f'micro-feeder run: started after {READY_TIMEOUT:g} s without {"; ".join(missing())}',
+              file=sys.stderr)
+
+
 def run(args: argparse.Namespace) -> int:
     flat = settings_from_args(args)
     if args.duration is not None and not args.duration > 0:
@@ -75,10 +99,14 @@ def run(args: argparse.Namespace) -> int:
         from ..nodes.actuator import Actuator
         from ..nodes.simulator import Simulator
 
+        # paused until the actuator's burst and the recorder are there: the run (and its log) starts at t = 0
         sim = session.add(lambda: Simulator(context=session.context, namespace=ns,
-                                            overrides={**model_flat, 'real_time_factor': args.real_time_factor}))
+                                            overrides={**model_flat, 'real_time_factor': args.real_time_factor},
+                                            hold=True))
         end = sim.stop_at(args.duration) if args.duration is not None else None   # before the actuator is built
         actuator = session.add(lambda: Actuator(context=session.context, namespace=ns, overrides=flat))
+        _wait_until_ready(session, sim, actuator, whole_burst=actuator.sends_whole_burst())
+        sim.resume()
         tty: TextIO | None = sys.stderr if sys.stderr.isatty() else None
         if tty is not None:
             sim.create_timer(STATUS_PERIOD, lambda: print('\r' + status_line(sim), end='', file=tty, flush=True))

@@ -190,6 +190,18 @@ class Actuator(Node):
         self._start_stream(self.sim_time)
         return f'burst streamed from t = {self._stream.origin_ns * 1e-9:.9f} s (sim time)'
 
+    def sends_whole_burst(self) -> bool:
+        """Whether :meth:`start` sends the configured burst as one message (else it streams it)."""
+        params, count = self._stroke_params()
+        if not count:
+            return False
+        times = sample_waveform(params, len(params.phases), self.get_parameter('knots_per_stroke').value)[0]
+        return times.size <= points_per_message(self.get_parameter('stream.max_points').value, len(params.phases))
+
+    def trajectory_subscribers(self) -> int:
+        """Subscriptions matched on ``actuator/trajectory``."""
+        return self._pub.get_subscription_count()
+
     def stop(self) -> str:
         """End any stream and publish an empty trajectory (stop: hold the strokes where they are)."""
         self._stream = None

@@ -104,7 +104,9 @@ class Simulator(Node):
     :class:`SimulationError` when the parameters cannot even start the simulation.
     """
 
-    def __init__(self, overrides: Mapping[str, Any] | None = None, **kwargs: Any):
+    def __init__(self, overrides: Mapping[str, Any] | None = None, *, hold: bool = False, **kwargs: Any):
+        """``hold``: the wall-clock loop waits at t = 0 until :meth:`resume` (``micro-feeder run`` holds it
+        until its actuator and recorder are there), whatever ``start_paused`` says."""
         super().__init__('simulator', **kwargs)
         # First, what destroy_node() needs: rclpy destroys a node whose construction failed below (a refused
         # parameter) at shutdown, and that must not end in an AttributeError hiding the reason.
@@ -173,7 +175,7 @@ class Simulator(Node):
                                      batch_interval=0.5 * self._period)
         if not self._lockstep:
             self._loop = TickLoop(self._period, self._tick, self._loop_failed)
-            self._set_paused(self._user_paused)
+            self._set_paused(self._user_paused or hold)
 
     def _publisher(self, msg_type: type, topic: str, name: str | None = None) -> Any:
         return self.create_publisher(msg_type, name or topic, topic_qos(topic))
@@ -236,6 +238,20 @@ class Simulator(Node):
             self._user_paused = True
             self._set_paused(True)
 
+    def resume(self) -> None:
+        """Let the wall-clock loop advance sim time (what ``~/pause false`` does); no effect in lockstep, after a
+        failure or at :meth:`stop_at`'s end."""
+        with self._lock:
+            self._user_paused = False
+            self._set_paused(False)
+
+    def outputs_matched(self) -> bool:
+        """True when every state topic the simulator publishes has at least one subscription matched (a
+        recorder that has not yet matched a topic would miss its first messages)."""
+        return all(pub.get_subscription_count() > 0 for pub in
+                   (self._pub_pose, self._pub_twist, self._pub_wrench, self._pub_joints, self._pub_mode,
+                    self._pub_transitions, self._pub_markers, self._pub_parameters, self._pub_receipts))
+
     def destroy_node(self) -> None:
         """Stop the loop and intake threads (waiting up to :data:`STOP_TIMEOUT` each for work in
         progress: a tick stuck in the physics is left to die with the process), then destroy the node."""
@@ -249,7 +265,10 @@ class Simulator(Node):
 
     def _set_paused(self, paused: bool) -> None:
         """Pause or run the wall-clock loop; it stays paused after a failure, at the end and in lockstep."""
+        was_paused = getattr(self, '_paused', True)
         self._paused = paused or bool(self.error) or self._lockstep or self._stepper.t >= self._t_end
+        if was_paused and not self._paused:     # the achieved real-time factor counts from here
+            self._window = (time.perf_counter(), self._stepper.t, self.states_published)
         if self._loop is not None:
             if self._paused:
                 self._loop.pause()

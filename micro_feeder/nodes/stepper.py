@@ -51,11 +51,19 @@ class Stepper:
         self._warm_up()
 
     def _warm_up(self) -> None:
-        """Run the compiled kernel once on a copy of the state, so that a first-call compile (seconds,
-        when numba's disk cache is cold) happens here and not inside the first timer tick."""
+        """Run every compiled function a tick or a command uses once, on copies, so that a first-call load
+        or compile (seconds with a cold numba cache, 10-40 ms warm) happens here and not under the simulator's
+        lock inside the first tick or the first command: the kernel, and a quintic trajectory command
+        (Hermite coefficients, its check against the piezo limits, its evaluation)."""
         state = self.state.copy()
         self.model.advance(state, 1e-6, self.schedule)
         self.model.observe(state, self.schedule)
+        n = self.model.n_actuators
+        schedule = StrokeSchedule.of_pieces(self.schedule.pieces)
+        knots = np.zeros((3, n))
+        table = schedule.command_trajectory(1e-6, [2e-6, 3e-6, 4e-6], knots, knots, knots)
+        check_table(table, CommandLimits(*self.limits))
+        self.model.advance(state, 5e-6, schedule)
 
     def reset(self, model: FeederModel | None = None) -> None:
         """Back to t = 0 (with ``model`` instead of the current one when given)."""
