@@ -8,6 +8,7 @@ against −7.8 µm offline.
 
 from __future__ import annotations
 
+import itertools
 import json
 import re
 import subprocess
@@ -87,5 +88,5 @@ def test_a_recorded_run_starts_at_sim_time_zero_without_a_stall(tmp_path: Path) 
     assert poses[0][0] <= 2_000_000, poses[:3]                     # the first tick's pose (or t = 0's)
     assert receipts == [0], receipts                                # the burst reached the simulator at t = 0
     running = [p for p in poses if p[0] > 0]                        # the held pose at t = 0 waits, by design
-    wall_gaps = [b[1] - a[1] for a, b in zip(running, running[1:])]
+    wall_gaps = [b[1] - a[1] for a, b in itertools.pairwise(running)]
     assert max(wall_gaps) < 50_000_000, max(wall_gaps)

@@ -410,13 +410,14 @@ def trajectory_table(times: Sequence[float], positions: np.ndarray, velocities: 
         span = np.array([0.0, 1.0])
     else:
         span = times - times[0]
-        if vel is not None:
-            span, coef = _jumps_at_short_gaps(times, span, pos, vel, acc, coef)
-            n_seg = span.size - 1
+    seg_start = np.tile(span, (n_act, 1))
+    if n_knots > 1 and vel is not None:
+        seg_start, coef = _jumps_at_short_gaps(times, span, pos, vel, acc, coef)
+        n_seg = seg_start.shape[1] - 1
     return StrokeTable(
         start=np.full(n_act, times[0]), period=np.full(n_act, span[-1]),
         count=np.ones(n_act, dtype=np.int64), before=pos[0].copy(), after=pos[-1].copy(),
-        seg_start=np.tile(span, (n_act, 1)), seg_coef=coef, n_seg=np.full(n_act, n_seg, dtype=np.int64))
+        seg_start=seg_start, seg_coef=coef, n_seg=np.full(n_act, n_seg, dtype=np.int64))
 
 
 JUMP_GAP = 2.0e-9     # s: knots at most this far apart mark a breakpoint the stroke jumps across
@@ -425,40 +426,40 @@ JUMP_GAP = 2.0e-9     # s: knots at most this far apart mark a breakpoint the st
 def _jumps_at_short_gaps(times: np.ndarray, span: np.ndarray, pos: np.ndarray, vel: np.ndarray,
                          acc: np.ndarray | None, coef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Knots at most :data:`JUMP_GAP` apart are a breakpoint, not a path to interpolate (docs/dynamics.md §2):
-    the stroke follows the earlier knot's side (its Taylor polynomial from s, ṡ, s̈) up to a switch time b
+    each actuator follows the earlier knot's side (its Taylor polynomial from s, ṡ, s̈) up to a switch time b
     and the later knot's side from b on, so a jump in ṡ or s̈ (the analytic waveform's, which the actuator
     brackets by knots ≤ 2 ns apart) is a hard breakpoint here as it is offline, not a ~1e9 m/s² quintic.
 
-    b is where the two sides' straight-line extrapolations meet (exact for a jump in ṡ alone), the gap's
-    middle when they do not meet inside it; kept ≥ a quarter nanosecond from either knot, as the actuator
-    places knots around a breakpoint. Returns (segment starts from the first knot, coefficients)."""
+    b is found per actuator from its two sides: where their positions' straight lines meet for a jump in ṡ,
+    where their velocities' lines meet for a jump in s̈ alone (exact but for the next order: an error in b
+    changes the velocity by Δs̈·δb, so b must be right, not merely inside the gap); the gap's middle when
+    nothing jumps. Returns (segment starts from the first knot, (actuators, segments) per actuator; the
+    coefficients)."""
     gaps = np.diff(times)
-    short = np.flatnonzero(gaps <= JUMP_GAP * (1.0 + 1e-9))
+    short = np.flatnonzero(gaps < JUMP_GAP + 0.5e-9)   # knot times are whole ns, give or take float rounding
     if short.size == 0:
-        return span, coef
-    n_act = pos.shape[1]
+        return np.tile(span, (pos.shape[1], 1)), coef
     acc = np.zeros_like(pos) if acc is None else acc
-    d = gaps[short][:, None]
-    dv = vel[short] - vel[short + 1]
-    meet = np.divide(pos[short + 1] - pos[short] - vel[short + 1] * d, dv, out=np.full_like(dv, np.nan),
-                     where=np.abs(dv) > 1e-300)
-    # one switch time for every actuator: that of the largest jump in ṡ (the others jump in s̈ at most there)
-    worst = np.argmax(np.abs(dv), axis=1)
-    tau = meet[np.arange(short.size), worst]
-    margin = np.minimum(0.25e-9, gaps[short] / 4.0)
-    tau = np.where(np.isfinite(tau), np.clip(tau, margin, gaps[short] - margin), gaps[short] / 2.0)
-    left = coef[:, short].copy()
-    left[:, :, :N_POLY] = 0.0
-    left[:, :, 0], left[:, :, 1], left[:, :, 2] = pos[short].T, vel[short].T, acc[short].T / 2.0
-    e = (gaps[short] - tau)[None, :]                       # from b to the later knot
+    d = gaps[short][:, None]                                      # (gaps, actuators) below
+    p0, v0, a0 = pos[short], vel[short], acc[short]
+    p1, v1, a1 = pos[short + 1], vel[short + 1], acc[short + 1]
+    dv, da = v0 - v1, a0 - a1
+    tiny = np.finfo(float).tiny
+    by_position = np.divide(p1 - p0 - v1 * d, dv, out=np.full_like(dv, np.nan), where=np.abs(dv) > tiny)
+    by_velocity = np.divide(v1 - v0 - a1 * d, da, out=np.full_like(da, np.nan), where=np.abs(da) > tiny)
+    tau = np.where(np.abs(dv) > np.abs(da) * d, by_position, by_velocity)
+    tau = np.where(np.isfinite(tau), np.clip(tau, 0.1 * d, 0.9 * d), d / 2.0)   # the actuator keeps ≥ d/4
+    e = d - tau                                                    # from b to the later knot
+    left = np.zeros((short.size, pos.shape[1], coef.shape[2]))
+    left[..., 0], left[..., 1], left[..., 2] = p0, v0, a0 / 2.0
     right = np.zeros_like(left)
-    p1, v1, a1 = pos[short + 1].T, vel[short + 1].T, acc[short + 1].T
-    right[:, :, 0], right[:, :, 1], right[:, :, 2] = p1 - v1 * e + a1 * e * e / 2.0, v1 - a1 * e, a1 / 2.0
+    right[..., 0], right[..., 1], right[..., 2] = p1 - v1 * e + a1 * e * e / 2.0, v1 - a1 * e, a1 / 2.0
     coef = coef.copy()
-    coef[:, short] = left
-    new_span = np.insert(span, short + 1, span[short] + tau)
-    new_coef = np.insert(coef, short + 1, right, axis=1)
-    return new_span, new_coef.reshape(n_act, new_span.size - 1, coef.shape[2])
+    coef[:, short] = left.transpose(1, 0, 2)
+    starts = np.tile(span, (pos.shape[1], 1))
+    new_starts = np.insert(starts, short + 1, (span[short][:, None] + tau).T, axis=1)
+    new_coef = np.insert(coef, short + 1, right.transpose(1, 0, 2), axis=1)
+    return new_starts, new_coef
 
 
 class StrokeSchedule:
@@ -536,12 +537,18 @@ class StrokeSchedule:
         keep = times > t_start
         current = self.evaluate(t_start)
         n_act = current.shape[1]
+        # A knot exactly at the start followed by one within JUMP_GAP is the earlier side of a breakpoint
+        # there (a burst that starts with a jump, e.g. a ``samples`` shape not starting at 0): it is the
+        # stroke from the start on, so the jump happens at the start, as offline.
+        at_start = np.flatnonzero(times == t_start)
+        jump_side = at_start.size == 1 and keep.any() and times[keep][0] - t_start < JUMP_GAP + 0.5e-9
+        first_index = int(at_start[0]) if jump_side else None
 
         def rows(values: np.ndarray | None, first: np.ndarray) -> np.ndarray | None:
             if values is None:
                 return None
-            values = np.asarray(values, dtype=float).reshape(times.size, n_act)[keep]
-            return np.vstack([first, values])
+            values = np.asarray(values, dtype=float).reshape(times.size, n_act)
+            return np.vstack([first if first_index is None else values[first_index], values[keep]])
 
         table = trajectory_table(np.concatenate([[t_start], times[keep]]),
                                  rows(positions, current[0]), rows(velocities, current[1]),
