@@ -286,3 +286,18 @@ def test_context_shutdown_stops_the_loop_thread() -> None:
     finally:
         rclpy.shutdown(context=context)
     assert not _loop_threads()
+
+
+def test_a_command_stamped_at_the_current_sim_time_is_not_late(lockstep: LockstepRig) -> None:
+    """A sender stamps with the sim time it reads (whole nanoseconds) while the simulator's time is a sum of
+    step periods (0.1 + 0.1 + 0.1 != 0.3): equal to the nanosecond is on time, not "late by 0.000 ms"."""
+    sim = lockstep.sim
+    for _ in range(12):                  # 12 x 1e-3 = 0.012000000000000004 in floats, stamped 0.012 s
+        lockstep.grant(sim.grant_step, 'grant_step()')
+    assert sim.stepper.t > 0.012
+    stamp = lockstep.probe.msgs['actuator/joint_states'][-1].header.stamp
+    zeros = np.zeros((2, 1))
+    msg = messages.trajectory(joint_names(1), np.array([0.0, 1e-3]), np.array([[0.0], [5e-6]]), zeros, zeros, stamp)
+    lockstep.command('actuator/trajectory', msg)
+    assert sim.commands.late == 0
+    assert sim.commands.refused == 0
