@@ -71,6 +71,7 @@ def test_a_recorded_run_starts_at_sim_time_zero_without_a_stall(tmp_path: Path) 
     at t = 0, the burst is applied at t = 0 as offline, and no wall-clock gap over 50 ms separates two poses
     (the command path is compiled before the loop runs, not under its lock in the first tick)."""
     from micro_feeder.logs.reader import LogReader
+    from micro_feeder.logs.series import part_series
 
     log = tmp_path / 'run'
     run = subprocess.run([*CLI, 'run', '--duration', '0.5', '--set', 'stroke.count=5', '--record', str(log)],
@@ -87,6 +88,11 @@ def test_a_recorded_run_starts_at_sim_time_zero_without_a_stall(tmp_path: Path) 
     receipts = [m.stamp_ns for m in reader.messages(['simulator/command_receipts'], decoded=True)]
     assert poses[0][0] <= 2_000_000, poses[:3]                     # the first tick's pose (or t = 0's)
     assert receipts == [0], receipts                                # the burst reached the simulator at t = 0
+    # plot's mode panel steps at the exact transition times, not at contact_state receive times
+    changes = [float(kv.value) for m in reader.messages(['particle/transitions'], decoded=True)
+               for status in m.message.status for kv in status.values if kv.key == 't_s']
+    mode = part_series(reader).mode
+    assert len(changes) == 10 and mode.t[1:].tolist() == changes, (changes, mode.t)
     running = [p for p in poses if p[0] > 0]                        # the held pose at t = 0 waits, by design
     wall_gaps = [b[1] - a[1] for a, b in itertools.pairwise(running)]
     assert max(wall_gaps) < 50_000_000, max(wall_gaps)
