@@ -23,7 +23,7 @@ lint: $(STAMP)
 	$(BIN)/ruff check .
 
 test: lint foxglove-client
-	$(BIN)/python -m pytest test
+	$(BIN)/python -m pytest test -m 'not paths'
 
 # The real Foxglove WebSocket client the live-view tests use (npm, pinned by package-lock.json; node >= 18).
 FOXGLOVE_CLIENT := test/foxglove_client
