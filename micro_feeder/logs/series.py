@@ -58,11 +58,10 @@ class PartSeries:
     time_axis: str  # 'sim time' or 'receive time'
 
 
-def transition_series(log: LogReader) -> Series | None:
-    """The mode from ``particle/transitions``: the mode at the first pose (from ``particle/contact_state``'s
-    first message, else stuck), then each change at its exact sim time (the key ``t_s``); None when the log
-    has no transitions topic. Exact where the contact-state topic is only placed by its receive time (which
-    drew a slide up to 3.5 ms late)."""
+def transition_series(log: LogReader, start_mode: int, t0: float) -> Series | None:
+    """The mode from ``particle/transitions``: ``start_mode`` (index into ``MODES``) from ``t0`` [s], then each
+    change at its exact sim time (the key ``t_s``); None when the log has no transitions topic. Exact where
+    the contact-state topic is only placed by its receive time (which drew a slide up to 3.5 ms late)."""
     if log.resolve('particle/transitions') is None:
         return None
     t, log_t, mode = [], [], []
@@ -73,14 +72,10 @@ def transition_series(log: LogReader) -> Series | None:
                 t.append(float(values['t_s']))
                 log_t.append((m.log_time_ns - log.start_ns) * 1e-9)
                 mode.append(MODES.index(values['to']))
-    first = next(iter(log.messages(['particle/contact_state'], decoded=True)), None)
-    start = MODES.index(first.message.data) if first is not None and first.message.data in MODES else 0
-    first_pose = next(iter(log.messages(['particle/pose'], decoded=True)), None)
-    t0 = (first_pose.stamp_ns or 0) * 1e-9 if first_pose is not None else 0.0
     order = np.argsort(np.asarray(t, float), kind='stable')
     return Series(np.concatenate([[t0], np.asarray(t, float)[order]]),
                   np.concatenate([[0.0], np.asarray(log_t, float)[order]]),
-                  {'mode': np.concatenate([[start], np.asarray(mode, float)[order]])})
+                  {'mode': np.concatenate([[start_mode], np.asarray(mode, float)[order]])})
 
 
 def part_series(log: LogReader) -> PartSeries:
@@ -93,7 +88,8 @@ def part_series(log: LogReader) -> PartSeries:
                         {'mode': lambda m: MODES.index(m.data) if m.data in MODES else -1})
     stamped = [s for s in (pose, twist, wrench) if len(s)]
     if stamped and any(np.any(s.t != 0) for s in stamped):
-        changes = transition_series(log)
+        first_mode = mode.values['mode'][0] if len(mode) and mode.values['mode'][0] >= 0 else MODES.index('stuck')
+        changes = transition_series(log, int(first_mode), float(pose.t[0]) if len(pose) else 0.0)
         if changes is not None:
             mode = changes
         else:

@@ -176,27 +176,31 @@ class Actuator(Node):
         streaming it. Returns a one-line description."""
         self._stream = None
         self.bursts += 1
-        params, count = self._stroke_params()
-        n = len(params.phases)
-        if count:
-            times, pos, vel, acc = sample_waveform(params, n, self.get_parameter('knots_per_stroke').value)
-            if times.size <= points_per_message(self.get_parameter('stream.max_points').value, n):
-                self._pub.publish(trajectory_cdr.encode(joint_names(n), np.round(times * 1e9), pos, vel, acc,
-                                                          Time()))
-                return f'burst sent: {times.size} knots on {n} joints, {times[-1]:.6g} s'
+        knots = self._whole_burst_knots()
+        if knots is not None:
+            times, pos, vel, acc = knots
+            n = pos.shape[1]
+            self._pub.publish(trajectory_cdr.encode(joint_names(n), np.round(times * 1e9), pos, vel, acc, Time()))
+            return f'burst sent: {times.size} knots on {n} joints, {times[-1]:.6g} s'
         self._pending_stream = True
         if self.sim_time is None:
             return 'burst streamed from the first sim time seen on actuator/joint_states'
         self._start_stream(self.sim_time)
         return f'burst streamed from t = {self._stream.origin_ns * 1e-9:.9f} s (sim time)'
 
-    def sends_whole_burst(self) -> bool:
-        """Whether :meth:`start` sends the configured burst as one message (else it streams it)."""
+    def _whole_burst_knots(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
+        """The configured burst's knots (:func:`sample_waveform`) when it is finite and fits in one message;
+        None when :meth:`start` streams it."""
         params, count = self._stroke_params()
         if not count:
-            return False
-        times = sample_waveform(params, len(params.phases), self.get_parameter('knots_per_stroke').value)[0]
-        return times.size <= points_per_message(self.get_parameter('stream.max_points').value, len(params.phases))
+            return None
+        n = len(params.phases)
+        knots = sample_waveform(params, n, self.get_parameter('knots_per_stroke').value)
+        return knots if knots[0].size <= points_per_message(self.get_parameter('stream.max_points').value, n) else None
+
+    def sends_whole_burst(self) -> bool:
+        """Whether :meth:`start` sends the configured burst as one message (else it streams it)."""
+        return self._whole_burst_knots() is not None
 
     def trajectory_subscribers(self) -> int:
         """Subscriptions matched on ``actuator/trajectory``."""

@@ -265,7 +265,7 @@ class Simulator(Node):
 
     def _set_paused(self, paused: bool) -> None:
         """Pause or run the wall-clock loop; it stays paused after a failure, at the end and in lockstep."""
-        was_paused = getattr(self, '_paused', True)
+        was_paused = self._paused
         self._paused = paused or bool(self.error) or self._lockstep or self._stepper.t >= self._t_end
         if was_paused and not self._paused:     # the achieved real-time factor counts from here
             self._window = (time.perf_counter(), self._stepper.t, self.states_published)

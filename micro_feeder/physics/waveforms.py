@@ -410,10 +410,11 @@ def trajectory_table(times: Sequence[float], positions: np.ndarray, velocities: 
         span = np.array([0.0, 1.0])
     else:
         span = times - times[0]
-    seg_start = np.tile(span, (n_act, 1))
     if n_knots > 1 and vel is not None:
-        seg_start, coef = _jumps_at_short_gaps(times, span, pos, vel, acc, coef)
+        seg_start, coef = _jumps_at_short_gaps(times, pos, vel, acc, coef)
         n_seg = seg_start.shape[1] - 1
+    else:
+        seg_start = np.tile(span, (n_act, 1))
     return StrokeTable(
         start=np.full(n_act, times[0]), period=np.full(n_act, span[-1]),
         count=np.ones(n_act, dtype=np.int64), before=pos[0].copy(), after=pos[-1].copy(),
@@ -423,8 +424,14 @@ def trajectory_table(times: Sequence[float], positions: np.ndarray, velocities: 
 JUMP_GAP = 2.0e-9     # s: knots at most this far apart mark a breakpoint the stroke jumps across
 
 
-def _jumps_at_short_gaps(times: np.ndarray, span: np.ndarray, pos: np.ndarray, vel: np.ndarray,
-                         acc: np.ndarray | None, coef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def is_jump_gap(gap: np.ndarray | float) -> np.ndarray | bool:
+    """Whether knots ``gap`` s apart bracket a breakpoint (at most :data:`JUMP_GAP`; knot times are whole
+    nanoseconds, so half a nanosecond of margin absorbs their float rounding)."""
+    return gap < JUMP_GAP + 0.5e-9
+
+
+def _jumps_at_short_gaps(times: np.ndarray, pos: np.ndarray, vel: np.ndarray, acc: np.ndarray | None,
+                         coef: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Knots at most :data:`JUMP_GAP` apart are a breakpoint, not a path to interpolate (docs/dynamics.md §2):
     each actuator follows the earlier knot's side (its Taylor polynomial from s, ṡ, s̈) up to a switch time b
     and the later knot's side from b on, so a jump in ṡ or s̈ (the analytic waveform's, which the actuator
@@ -433,12 +440,14 @@ def _jumps_at_short_gaps(times: np.ndarray, span: np.ndarray, pos: np.ndarray, v
     b is found per actuator from its two sides: where their positions' straight lines meet for a jump in ṡ,
     where their velocities' lines meet for a jump in s̈ alone (exact but for the next order: an error in b
     changes the velocity by Δs̈·δb, so b must be right, not merely inside the gap); the gap's middle when
-    nothing jumps. Returns (segment starts from the first knot, (actuators, segments) per actuator; the
-    coefficients)."""
+    nothing jumps. Returns the segment starts from the first knot (actuators, segments + 1) and the
+    coefficients (actuators, segments, coefficients)."""
+    span = times - times[0]
+    starts = np.tile(span, (pos.shape[1], 1))
     gaps = np.diff(times)
-    short = np.flatnonzero(gaps < JUMP_GAP + 0.5e-9)   # knot times are whole ns, give or take float rounding
+    short = np.flatnonzero(is_jump_gap(gaps))
     if short.size == 0:
-        return np.tile(span, (pos.shape[1], 1)), coef
+        return starts, coef
     acc = np.zeros_like(pos) if acc is None else acc
     d = gaps[short][:, None]                                      # (gaps, actuators) below
     p0, v0, a0 = pos[short], vel[short], acc[short]
@@ -456,7 +465,6 @@ def _jumps_at_short_gaps(times: np.ndarray, span: np.ndarray, pos: np.ndarray, v
     right[..., 0], right[..., 1], right[..., 2] = p1 - v1 * e + a1 * e * e / 2.0, v1 - a1 * e, a1 / 2.0
     coef = coef.copy()
     coef[:, short] = left.transpose(1, 0, 2)
-    starts = np.tile(span, (pos.shape[1], 1))
     new_starts = np.insert(starts, short + 1, (span[short][:, None] + tau).T, axis=1)
     new_coef = np.insert(coef, short + 1, right.transpose(1, 0, 2), axis=1)
     return new_starts, new_coef
@@ -541,7 +549,7 @@ class StrokeSchedule:
         # there (a burst that starts with a jump, e.g. a ``samples`` shape not starting at 0): it is the
         # stroke from the start on, so the jump happens at the start, as offline.
         at_start = np.flatnonzero(times == t_start)
-        jump_side = at_start.size == 1 and keep.any() and times[keep][0] - t_start < JUMP_GAP + 0.5e-9
+        jump_side = at_start.size == 1 and keep.any() and is_jump_gap(times[keep][0] - t_start)
         first_index = int(at_start[0]) if jump_side else None
 
         def rows(values: np.ndarray | None, first: np.ndarray) -> np.ndarray | None:
