@@ -6,8 +6,9 @@ phases and places, piezo model on or off) the part must move the same on
 * ``offline``: ``FeederModel.run``, what ``micro-feeder simulate`` integrates (the analytic strokes);
 * ``stepped``: the simulator's Stepper in 1 ms ticks, driven by the actuator's own serialized
   JointTrajectory messages (the whole burst in one message, or the streamed windows the actuator sends
-  when it does not fit), decoded and checked by the simulator's command code. ``resim`` runs this same
-  Stepper on the commands and stop times it reads from a log, which test_resim.py proves bit for bit;
+  when it does not fit; its ``stream.max_points`` and ``stream.window`` are drawn too), decoded and
+  checked by the simulator's command code. ``resim`` runs this same Stepper on the commands and stop times
+  it reads from a log, which test_resim.py proves bit for bit;
 * ``sweep``: the row of a one-point ``sweep`` (distance, transition counts, regime).
 
 "Same" is: equal transition counts, distance within 1e-9 m or 1e-6 relative. ``make test`` runs the listed
@@ -61,6 +62,9 @@ def scenarios(draw: st.DrawFn) -> dict[str, object]:
         'surface.widths': [draw(st.floats(0.5e-3, 1.5e-3)) for _ in range(n)],
         'particle.x0': draw(st.floats(-1.5e-3, 1.5e-3)),
         'piezo.enabled': draw(st.booleans()),
+        # the actuator's: a burst longer than max_points knots is streamed in windows of at most stream.window
+        'stream.max_points': draw(st.sampled_from([MAX_POINTS, draw(st.integers(16, 200))])),
+        'stream.window': draw(st.sampled_from([WINDOW, draw(st.floats(2e-4, 5e-3))])),
     }
     if waveform == 'samples':
         # first sample 0: a shape starting elsewhere jumps in *position* at the burst's start, which two knots
@@ -90,20 +94,22 @@ def _offline(flat: dict[str, object], duration: float) -> tuple[float, dict[str,
     return state.distance, state.transitions, state.mode
 
 
-def _stepped(flat: dict[str, object], duration: float) -> tuple[float, dict[str, int], str]:
-    """The Stepper in ticks, fed the bytes the actuator publishes, as the simulator node applies them."""
+def _stepped(flat: dict[str, object], duration: float, max_points: int = MAX_POINTS,
+             window: float = WINDOW) -> tuple[float, dict[str, int], str]:
+    """The Stepper in ticks, fed the bytes the actuator publishes (``max_points`` and ``window``: its
+    ``stream.*`` parameters), as the simulator node applies them."""
     stepper = Stepper(build_model(flat))
     params = StrokeParams.from_flat(flat)
     n = stepper.model.n_actuators
     names = joint_names(n)
     stream = None
     times, pos, vel, acc = sample_waveform(params, n)
-    if times.size <= points_per_message(MAX_POINTS, n):      # the actuator sends it whole, stamped 0
+    if times.size <= points_per_message(max_points, n):      # the actuator sends it whole, stamped 0
         stepper.command_trajectory(parse_trajectory_cdr(
             trajectory_cdr.encode(names, np.round(times * 1e9), pos, vel, acc, messages.to_time(0.0)),
             names, stepper.limits))
     else:                                                     # streamed from the sim time it sees
-        stream = StrokeStream(params, params.count, n, 0, window=WINDOW, max_points=MAX_POINTS,
+        stream = StrokeStream(params, params.count, n, 0, window=window, max_points=max_points,
                               knots_per_stroke=0)
     for i in range(1, round(duration / TICK) + 1):
         while stream is not None and not stream.done and stream.scheduled_until < stepper.t + LEAD:
@@ -135,12 +141,15 @@ def _conditioning(flat: dict[str, object], duration: float, offline: tuple) -> t
 
 
 def _check_paths(scenario: dict[str, object]) -> None:
+    scenario = dict(scenario)
+    streaming = {'max_points': scenario.pop('stream.max_points', MAX_POINTS),
+                 'window': scenario.pop('stream.window', WINDOW)}
     flat = _settings(scenario)
     duration = _duration(flat)
     offline = _offline(flat, duration)
     stable, allowance = _conditioning(flat, duration, offline)
     assume(stable)                # counts on a knife's edge are no path's answer
-    stepped = _stepped(flat, duration)
+    stepped = _stepped(flat, duration, **streaming)
     assert stepped[1:] == offline[1:], (scenario, offline, stepped)
     assert _same_distance(stepped[0], offline[0], allowance), (scenario, offline, stepped, allowance)
     row = sweep(flat, 'stroke.amplitude', [StrokeParams.from_flat(flat).amplitude], duration=duration)[0]
@@ -159,6 +168,12 @@ ISSUE_CASES = [   # issue 26: run against simulate, the strokes that differed (a
     {'stroke.waveform': 'asymmetric', 'stroke.duty': 0.8, 'stroke.frequency': 800.0, 'stroke.count': 4},
     {'stroke.waveform': 'half_sine', 'stroke.count': 3},
     {},
+    # streamed in 2 ms windows: a window's first knot is the previous one's last, not the held value with
+    # ṡ = 0 (which kinked the stroke at every joint and threw the soak's travelling wave 123 mm)
+    {'stroke.count': 20, 'stream.max_points': 40, 'stream.window': 2e-3},
+    {'stroke.waveform': 'sine', 'stroke.count': 20, 'stroke.phases': [0.0, 0.25, 0.5, 0.75],
+     'surface.centers': [-1.5e-3, -0.5e-3, 0.5e-3, 1.5e-3], 'surface.widths': [1e-3] * 4,
+     'stream.max_points': 64, 'stream.window': 1e-3},
 ]
 FOUND_CASES = [   # found by the property below, fixed
     # a knot pair 2 ns apart read as 2.0000000000052 ns (not a breakpoint): a sine's end became a ~1e8 m/s²

@@ -441,7 +441,7 @@ def _jumps_at_short_gaps(times: np.ndarray, pos: np.ndarray, vel: np.ndarray, ac
     where their velocities' lines meet for a jump in s̈ alone (exact but for the next order: an error in b
     changes the velocity by Δs̈·δb, so b must be right, not merely inside the gap); the gap's middle when
     nothing jumps. Returns the segment starts from the first knot (actuators, segments + 1) and the
-    coefficients (actuators, segments, coefficients)."""
+    coefficients (actuators, segments, 9)."""
     span = times - times[0]
     starts = np.tile(span, (pos.shape[1], 1))
     gaps = np.diff(times)
@@ -536,21 +536,22 @@ class StrokeSchedule:
                            accelerations: np.ndarray | None = None) -> StrokeTable:
         """Replace the schedule from ``t_start`` with a trajectory through the given knots.
 
-        ``knot_times`` are absolute sim times (header stamp + time_from_start); knots at or before
-        ``t_start`` are dropped. When the first remaining knot lies after ``t_start``, the current
-        stroke (s, ṡ, s̈ at ``t_start``) becomes the first knot, so the stroke stays continuous. An
-        empty trajectory holds the current position. Returns the table now in force from ``t_start``.
+        ``knot_times`` are absolute sim times (header stamp + time_from_start); knots before ``t_start`` are
+        dropped. A knot exactly at ``t_start`` is the stroke from then on (joint_trajectory_controller
+        samples a point at time 0 as it is): a stream's window starts where the previous one ends, at a knot
+        both share, and a burst that starts with a jump (a ``sine``, a ``samples`` shape not starting at 0)
+        jumps at its start, as offline. Otherwise the current stroke (s, ṡ, s̈ at ``t_start``) becomes the
+        first knot, so the stroke stays continuous. (The current stroke at a piece's very end is its held
+        value with ṡ = s̈ = 0: taking it instead of the shared knot put a velocity kink at every window
+        joint, which threw the part of the soak's travelling wave 123 mm.) An empty trajectory holds the
+        current position. Returns the table now in force from ``t_start``.
         """
         times = np.asarray(knot_times, dtype=float)
         keep = times > t_start
         current = self.evaluate(t_start)
         n_act = current.shape[1]
-        # A knot exactly at the start followed by one within JUMP_GAP is the earlier side of a breakpoint
-        # there (a burst that starts with a jump, e.g. a ``samples`` shape not starting at 0): it is the
-        # stroke from the start on, so the jump happens at the start, as offline.
         at_start = np.flatnonzero(times == t_start)
-        jump_side = at_start.size == 1 and keep.any() and is_jump_gap(times[keep][0] - t_start)
-        first_index = int(at_start[0]) if jump_side else None
+        first_index = int(at_start[0]) if at_start.size else None
 
         def rows(values: np.ndarray | None, first: np.ndarray) -> np.ndarray | None:
             if values is None:
