@@ -21,6 +21,7 @@ $(STAMP): requirements.txt constraints.txt setup.py package.xml
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
+	$(BIN)/lint-imports --no-cache
 
 test: lint foxglove-client
 	$(BIN)/python -m pytest test -m 'not paths'

@@ -31,7 +31,8 @@ setup(
     ],
     extras_require={
         'dask': ['dask[distributed]>=2025.1'],
-        'test': ['pytest', 'pytest-timeout', 'rosbags', 'ruff', 'hypothesis', 'dask[distributed]>=2025.1'],
+        'test': ['pytest', 'pytest-timeout', 'rosbags', 'ruff', 'hypothesis', 'import-linter',
+                 'dask[distributed]>=2025.1'],
     },
     zip_safe=True,
     maintainer='micro_feeder team',

@@ -24,12 +24,13 @@ import time
 
 from bench_soak import CASES, wave_settings
 
-from micro_feeder.nodes import messages, trajectory_cdr
-from micro_feeder.nodes.actuator import StrokeStream
-from micro_feeder.nodes.commands import joint_names, parse_trajectory_cdr
-from micro_feeder.nodes.stepper import Stepper, build_model
-from micro_feeder.nodes.transitions import TransitionEncoder
+from micro_feeder.interface import messages, stamps, trajectory_cdr
+from micro_feeder.interface.names import joint_names
+from micro_feeder.interface.transitions import TransitionEncoder
 from micro_feeder.physics.waveforms import StrokeParams
+from micro_feeder.sim.commands import parse_trajectory_cdr
+from micro_feeder.sim.stepper import Stepper, build_model
+from micro_feeder.sim.stream import StrokeStream
 
 TICK, LEAD, WINDOW = 1e-3, 0.2, 0.02             # s
 BUDGET_US = {n: cpu_percent * TICK * 1e4 for n, (_minutes, cpu_percent) in CASES.items()}   # µs per tick
@@ -53,7 +54,7 @@ class Feeder:
         while self.stream.scheduled_until < self.stepper.t + LEAD:
             stamp_ns, offsets_ns, knots = self.stream.next_window()
             data = trajectory_cdr.encode(self.names, offsets_ns, knots[0], knots[1], knots[2],
-                                         messages.to_time(stamp_ns * 1e-9))
+                                         stamps.to_time(stamp_ns * 1e-9))
             start = time.thread_time()
             self.stepper.command_trajectory(parse_trajectory_cdr(data, self.names, self.stepper.limits))
             self.window_cpu += time.thread_time() - start

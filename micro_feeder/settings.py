@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import difflib
 import re
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -20,6 +20,8 @@ from .physics.contact.params import ContactParams
 from .physics.dynamics.params import dynamics_parameter_groups
 from .physics.parameters import ParameterError, ParameterGroup, ParamSpec, all_specs
 from .physics.particle import ParticleParams
+from .physics.surface import SurfaceParams
+from .physics.waveforms import StrokeParams, waveform_table
 
 # The model's parameter groups: the simulator declares these as ROS parameters.
 PARAMETER_GROUPS: list[type[ParameterGroup]] = [ContactParams, ParticleParams, *dynamics_parameter_groups()]
@@ -141,3 +143,21 @@ def build_group(group: type[ParameterGroup], flat: Mapping[str, Any]) -> Any:
         return group.from_flat(flat)
     except ParameterError as err:
         raise SettingsError(str(err)) from err
+
+
+# Every model parameter group (the namespace of config/feeder.yaml and --set), as the nodes declare them.
+MODEL_GROUPS: tuple[type[ParameterGroup], ...] = tuple(PARAMETER_GROUPS)
+
+
+def model_specs(groups: Iterable[type[ParameterGroup]] = MODEL_GROUPS) -> dict[str, tuple[ParamSpec, Any]]:
+    """``{dotted name: (spec, default)}`` of the model parameters (defaults as ROS values: lists, not tuples)."""
+    return {name: (spec, list(default) if isinstance(default, tuple) else default)
+            for name, (spec, default) in all_specs(list(groups)).items()}
+
+
+def validate_model(flat: Mapping[str, Any], groups: Sequence[type[ParameterGroup]] = MODEL_GROUPS) -> None:
+    """Check a whole flat model mapping without building the contact tables: every group, and one
+    stroke phase per actuator when both groups are present. Raises :class:`ParameterError`."""
+    built = {group: group.from_flat(flat) for group in groups}
+    if SurfaceParams in built and StrokeParams in built:
+        waveform_table(built[StrokeParams], built[SurfaceParams].n_actuators)

@@ -19,7 +19,7 @@ from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory
 
-from micro_feeder.logs.topics import TOPICS
+from micro_feeder.interface.topics import TOPICS
 from micro_feeder.nodes._ros import message_class, topic_qos
 
 

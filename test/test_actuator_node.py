@@ -13,11 +13,12 @@ from rclpy.parameter import Parameter
 from ros_helpers import wait_until
 from std_srvs.srv import Trigger
 
-from micro_feeder.nodes.actuator import Actuator, sample_waveform
-from micro_feeder.nodes.commands import parse_trajectory
+from micro_feeder.nodes.actuator import Actuator
 from micro_feeder.nodes.simulator import Simulator
 from micro_feeder.physics.trajectory import sample_table, table_range
 from micro_feeder.physics.waveforms import StrokeParams, trajectory_table, waveform_table
+from micro_feeder.sim.commands import parse_trajectory
+from micro_feeder.sim.stream import sample_waveform
 
 
 def _peak(msg) -> float:

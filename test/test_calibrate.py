@@ -19,13 +19,13 @@ from ros_helpers import wait_until
 from micro_feeder.cli import main
 from micro_feeder.explore.calibrate import CalibrationError, calibrate, residuals
 from micro_feeder.explore.runners import InProcess, LocalProcesses
-from micro_feeder.nodes import messages
-from micro_feeder.nodes.actuator import sample_waveform
-from micro_feeder.nodes.commands import joint_names
+from micro_feeder.interface import messages, stamps
+from micro_feeder.interface.names import joint_names
 from micro_feeder.nodes.recorder import Recorder
 from micro_feeder.nodes.simulator import Simulator
 from micro_feeder.physics.waveforms import StrokeParams
 from micro_feeder.settings import known_parameters
+from micro_feeder.sim.stream import sample_waveform
 
 STEP = 1e-4          # s per simulator/step
 STEPS = 80           # 6 strokes at 1.2 kHz (5 ms), then 3 ms at rest
@@ -49,7 +49,7 @@ def _record(context: Context, path: Path, stroke: StrokeParams) -> None:
                    TIMEOUT, executor=executor, what='recorder and probe matched')
         times, pos, vel, acc = sample_waveform(stroke, 1, 40)
         probe.publish('actuator/trajectory', messages.trajectory(joint_names(1), times, pos, vel, acc,
-                                                                 messages.to_time(0.0)), executor)
+                                                                 stamps.to_time(0.0)), executor)
         wait_until(lambda: recorder.received['/simulator/command_receipts'] == 1, TIMEOUT, executor=executor,
                    what='receipt')
         at_start = recorder.received['/particle/pose']

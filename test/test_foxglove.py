@@ -177,8 +177,8 @@ def test_a_port_in_use_is_refused_with_the_reason_and_no_log(tmp_path: Path) -> 
 def test_the_layout_plots_fields_the_live_view_sends() -> None:
     """Every panel path of config/foxglove_layout.json names a topic the viewer forwards and a field its
     schema has (a typo would leave a panel silently empty)."""
+    from micro_feeder.interface.topics import TOPICS
     from micro_feeder.logs.schemas import field_types
-    from micro_feeder.logs.topics import TOPICS
     from micro_feeder.viz.viewer import FRICTION_SCHEMA, FRICTION_TOPIC, SCENE_TOPIC, TRANSFORMS_TOPIC
 
     layout = json.loads((Path(__file__).parents[1] / 'config' / 'foxglove_layout.json').read_text())

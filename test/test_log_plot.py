@@ -14,11 +14,11 @@ from std_msgs.msg import Header, String
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from micro_feeder.cli import main as cli_main
-from micro_feeder.logs.plot import active_window, plot_log
 from micro_feeder.logs.reader import LogReader
 from micro_feeder.logs.series import part_series
 from micro_feeder.logs.strokes import commanded_strokes
 from micro_feeder.logs.writer import LogWriter
+from micro_feeder.plots.log import active_window, plot_log
 
 T0 = 1_700_000_000_000_000_000  # ns, receive-time origin
 RECEIVED = 0.5                  # s, sim time at which the simulator received the trajectory

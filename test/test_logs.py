@@ -17,12 +17,12 @@ from rosbags.highlevel import AnyReader
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from micro_feeder.logs.export import export_csv
-from micro_feeder.logs.plot import plot_log
 from micro_feeder.logs.reader import LogReader, TruncatedLogWarning
 from micro_feeder.logs.recover import recover
 from micro_feeder.logs.schemas import SEPARATOR, schema_text
 from micro_feeder.logs.summary import format_summary, summarize
 from micro_feeder.logs.writer import LogWriter
+from micro_feeder.plots.log import plot_log
 
 
 def rosbags_messages(path: Path) -> list[tuple[str, int, bytes, object]]:

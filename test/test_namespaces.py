@@ -76,3 +76,85 @@ def test_node_remapping_moves_the_services_and_own_topics(ros_context: Context) 
         assert '/clock' not in topics
     finally:
         sim.destroy_node()
+
+
+def test_a_second_simulator_in_one_namespace_is_refused_with_the_reason(ros_context: Context) -> None:
+    """Two feeders in one namespace would mix their states and commands (and their logs): a simulator
+    started where a live one of its name runs exits 2 saying so and what to do, and the first runs on."""
+    sim = Simulator(context=ros_context, namespace='/dup')
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(sim)
+    try:
+        exe = shutil.which('simulator', path=str(Path(sys.executable).parent))
+        second = subprocess.Popen([exe, '--ros-args', '-r', '__ns:=/dup'], stdout=subprocess.PIPE,
+                                  stderr=subprocess.STDOUT, text=True)
+        deadline = 60.0
+        while second.poll() is None and deadline > 0:     # spin the first so that it is discoverable
+            executor.spin_once(timeout_sec=0.1)
+            deadline -= 0.1
+        output = second.communicate(timeout=10)[0] if second.poll() is not None else ''
+        if second.poll() is None:
+            second.kill()
+            second.communicate()
+        assert second.returncode == 2, output
+        assert 'another simulator named /dup/simulator is running' in output, output
+        assert '__ns:=' in output and 'Traceback' not in output, output
+        for _ in range(20):                      # the refused one published nothing the first would count
+            executor.spin_once(timeout_sec=0.05)
+        status = sim.diagnostics()
+        assert not sim.error and {kv.key: kv.value for kv in status.values}['other_simulators'] == '0'
+    finally:
+        executor.shutdown()
+        sim.destroy_node()
+
+
+def test_a_simulator_restarted_after_a_kill_is_not_refused(ros_context: Context) -> None:
+    """A SIGKILLed simulator leaves its endpoints in the graph for the DDS lease (~20 s); only a live one
+    (whose latched ~/parameters arrives) refuses a newcomer, so a restart right after a crash runs."""
+    exe = shutil.which('simulator', path=str(Path(sys.executable).parent))
+    first = subprocess.Popen([exe, '--ros-args', '-r', '__ns:=/crash'], stdout=subprocess.PIPE,
+                             stderr=subprocess.STDOUT, text=True)
+    probe = Node('crash_probe', context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(probe)
+    try:
+        wait_until(lambda: probe.count_publishers('/crash/particle/pose') > 0, 60, executor=executor,
+                   what='the first simulator')
+        first.kill()
+        first.communicate()
+        sim = Simulator(context=ros_context, namespace='/crash')   # raises DuplicateSimulator if refused
+        sim.destroy_node()
+    finally:
+        if first.poll() is None:
+            first.kill()
+            first.communicate()
+        executor.shutdown()
+        probe.destroy_node()
+
+
+def test_two_runs_started_together_in_one_namespace_do_not_both_run(tmp_path: Path) -> None:
+    """Two ``micro-feeder run`` in one namespace started at the same instant (the issue's silent cross-talk):
+    never both succeed; each one that does not says why."""
+    exe = shutil.which('micro-feeder', path=str(Path(sys.executable).parent))
+    runs = [subprocess.Popen([exe, 'run', '--namespace', 'twin', '--duration', '4', '--set', 'stroke.count=2',
+                              '--record', str(tmp_path / f'log{k}')],
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) for k in range(2)]
+    outputs = [run.communicate(timeout=180)[0] for run in runs]
+    codes = [run.returncode for run in runs]
+    assert codes.count(0) == 1, outputs            # the older runs on
+    for code, output in zip(codes, outputs, strict=True):
+        if code != 0:
+            assert 'another simulator named /twin/simulator is running' in output, output
+
+
+def test_simulators_that_start_together_report_each_other_on_diagnostics() -> None:
+    import numpy as np
+
+    from micro_feeder.realtime.diagnostics import ERROR, LoopSnapshot, loop_status
+
+    snapshot = LoopSnapshot(sim_time=0.0, mode='stuck', paused=False, lockstep=False, error='', rtf_target=1.0,
+                            achieved_rtf=1.0, publish_rate=1000.0, periods_ms=np.zeros(0), busy_ms=np.zeros(0),
+                            overruns=0, tick_age=0.0, steps_granted=0, states_published=0, pending_reset=False,
+                            transitions={}, intake={}, other_simulators=1)
+    status = loop_status(snapshot)
+    assert status.level == ERROR and 'namespace' in status.message and status.values['other_simulators'] == '1'

@@ -12,13 +12,14 @@ from builtin_interfaces.msg import Duration
 from rcl_interfaces.msg import ParameterType
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from micro_feeder.nodes.actuator import sample_waveform
-from micro_feeder.nodes.commands import CommandRejected, parse_setpoints, parse_trajectory, start_time
-from micro_feeder.nodes.messages import tilt_quaternion, to_time
-from micro_feeder.nodes.parameters import descriptor, model_specs
-from micro_feeder.nodes.stepper import Stepper, build_model
+from micro_feeder.interface.messages import tilt_quaternion
+from micro_feeder.interface.stamps import to_time
+from micro_feeder.nodes.parameters import descriptor
 from micro_feeder.physics.waveforms import StrokeParams, waveform_table
-from micro_feeder.settings import load_settings
+from micro_feeder.settings import load_settings, model_specs
+from micro_feeder.sim.commands import CommandRejected, parse_setpoints, parse_trajectory, start_time
+from micro_feeder.sim.stepper import Stepper, build_model
+from micro_feeder.sim.stream import sample_waveform
 
 LIMITS = (-200e-6, 200e-6)
 

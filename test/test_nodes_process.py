@@ -13,8 +13,8 @@ from ros_helpers import wait_until
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
+from micro_feeder.interface.names import TRANSITION_KINDS
 from micro_feeder.nodes._ros import topic_qos
-from micro_feeder.nodes.transitions import TRANSITION_KINDS
 
 
 def test_actuator_and_simulator_processes(ros_context: Context) -> None:

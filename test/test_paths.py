@@ -28,12 +28,13 @@ from hypothesis import strategies as st
 
 from micro_feeder.explore.evaluate import regime
 from micro_feeder.explore.sweep import sweep
-from micro_feeder.nodes import messages, trajectory_cdr
-from micro_feeder.nodes.actuator import StrokeStream, points_per_message, sample_waveform
-from micro_feeder.nodes.commands import joint_names, parse_trajectory_cdr
-from micro_feeder.nodes.stepper import Stepper, build_model
+from micro_feeder.interface import stamps, trajectory_cdr
+from micro_feeder.interface.names import joint_names
 from micro_feeder.physics.waveforms import WAVEFORMS, StrokeParams
 from micro_feeder.settings import load_settings
+from micro_feeder.sim.commands import parse_trajectory_cdr
+from micro_feeder.sim.stepper import Stepper, build_model
+from micro_feeder.sim.stream import StrokeStream, points_per_message, sample_waveform
 
 EXAMPLES = int(os.environ.get('MF_PATH_EXAMPLES', '200'))
 TICK = 1e-3                   # s: the simulator's default step_period
@@ -106,7 +107,7 @@ def _stepped(flat: dict[str, object], duration: float, max_points: int = MAX_POI
     times, pos, vel, acc = sample_waveform(params, n)
     if times.size <= points_per_message(max_points, n):      # the actuator sends it whole, stamped 0
         stepper.command_trajectory(parse_trajectory_cdr(
-            trajectory_cdr.encode(names, np.round(times * 1e9), pos, vel, acc, messages.to_time(0.0)),
+            trajectory_cdr.encode(names, np.round(times * 1e9), pos, vel, acc, stamps.to_time(0.0)),
             names, stepper.limits))
     else:                                                     # streamed from the sim time it sees
         stream = StrokeStream(params, params.count, n, 0, window=window, max_points=max_points,
@@ -115,7 +116,7 @@ def _stepped(flat: dict[str, object], duration: float, max_points: int = MAX_POI
         while stream is not None and not stream.done and stream.scheduled_until < stepper.t + LEAD:
             stamp_ns, offsets_ns, knots = stream.next_window()
             data = trajectory_cdr.encode(names, offsets_ns, knots[0], knots[1], knots[2],
-                                         messages.to_time(stamp_ns * 1e-9))
+                                         stamps.to_time(stamp_ns * 1e-9))
             stepper.command_trajectory(parse_trajectory_cdr(data, names, stepper.limits))
         stepper.advance(i * TICK)
     return stepper.state.distance, stepper.state.transitions, stepper.state.mode

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from ros_helpers import wait_until
 
-from micro_feeder.nodes.commands import start_time
 from micro_feeder.realtime.diagnostics import ERROR, OK, WARN, LoopSnapshot, loop_status
 from micro_feeder.realtime.intake import CommandIntake, Received, ThrottledLog, plan
 from micro_feeder.realtime.loop import TickLoop
+from micro_feeder.sim.commands import start_time
 
 
 def _parse(received: Received) -> str:

@@ -24,15 +24,16 @@ from ros_helpers import wait_until
 from std_msgs.msg import Float64MultiArray
 
 from micro_feeder.cli import main as cli_main
+from micro_feeder.interface import messages, stamps
+from micro_feeder.interface.names import joint_names
 from micro_feeder.logs.reader import LogReader
 from micro_feeder.logs.summary import format_summary, summarize
-from micro_feeder.nodes import messages
-from micro_feeder.nodes.actuator import sample_waveform
-from micro_feeder.nodes.commands import joint_names
 from micro_feeder.nodes.recorder import Recorder
-from micro_feeder.nodes.resim import ResimError, resimulate, stop_times
 from micro_feeder.nodes.simulator import Simulator
 from micro_feeder.physics.waveforms import StrokeParams
+from micro_feeder.sim.replay import stop_times
+from micro_feeder.sim.resim import ResimError, resimulate
+from micro_feeder.sim.stream import sample_waveform
 
 STEP = 1e-4     # s: not a power of two, so sim times are sums that only the simulator's own additions reproduce
 TIMEOUT = 10.0  # s, any single wait
@@ -42,14 +43,14 @@ STEPS = 260     # simulator/step calls in the recorded run
 def _burst(stamp_s: float) -> object:
     """The actuator's burst (4 strokes, 80 um) stamped at ``stamp_s`` (s, sim time; 0 = on receipt)."""
     times, pos, vel, acc = sample_waveform(StrokeParams(count=4, amplitude=80e-6), 1, 40)
-    return messages.trajectory(joint_names(1), times, pos, vel, acc, messages.to_time(stamp_s))
+    return messages.trajectory(joint_names(1), times, pos, vel, acc, stamps.to_time(stamp_s))
 
 
 def _hold(stamp_s: float, stroke: float) -> object:
     """Position-only knots (linear interpolation): from 0 to ``stroke`` (m) in 0.5 ms from ``stamp_s``."""
     zeros = np.zeros((2, 1))
     msg = messages.trajectory(joint_names(1), np.array([0.0, 5e-4]), np.array([[0.0], [stroke]]), zeros, zeros,
-                              messages.to_time(stamp_s))
+                              stamps.to_time(stamp_s))
     for point in msg.points:
         point.velocities, point.accelerations = [], []
     return msg
@@ -198,8 +199,8 @@ def _jittered_log(path: Path, offset: float = 0.0) -> None:
     from rclpy.serialization import serialize_message
 
     from micro_feeder.logs.writer import LogWriter
-    from micro_feeder.nodes.parameters import model_specs
-    from micro_feeder.nodes.stepper import Stepper, build_model
+    from micro_feeder.settings import model_specs
+    from micro_feeder.sim.stepper import Stepper, build_model
 
     stepper = Stepper(build_model({name: default for name, (_, default) in model_specs().items()}))
     writer = LogWriter(path)

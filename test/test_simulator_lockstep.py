@@ -26,11 +26,12 @@ from std_srvs.srv import SetBool, Trigger
 from test_simulator_node import Rig
 from trajectory_msgs.msg import JointTrajectory
 
-from micro_feeder.nodes import messages
-from micro_feeder.nodes.actuator import sample_waveform
-from micro_feeder.nodes.commands import joint_names, parse_setpoints, parse_trajectory
-from micro_feeder.nodes.stepper import Stepper, build_model
+from micro_feeder.interface import messages, stamps
+from micro_feeder.interface.names import joint_names
 from micro_feeder.physics.waveforms import StrokeParams
+from micro_feeder.sim.commands import parse_setpoints, parse_trajectory
+from micro_feeder.sim.stepper import Stepper, build_model
+from micro_feeder.sim.stream import sample_waveform
 
 STEP = 1e-3
 TIMEOUT = 10.0  # s, any single wait
@@ -76,7 +77,7 @@ def ramp(stroke: float, duration: float = 1e-3) -> JointTrajectory:
     """Position-only knots from 0 to ``stroke`` (m) over ``duration`` (s), stamp 0 (from receipt)."""
     zeros = np.zeros((2, 1))
     msg = messages.trajectory(joint_names(1), np.array([0.0, duration]), np.array([[0.0], [stroke]]), zeros, zeros,
-                              messages.to_time(0.0))
+                              stamps.to_time(0.0))
     for point in msg.points:
         point.velocities, point.accelerations = [], []
     return msg
@@ -85,7 +86,7 @@ def ramp(stroke: float, duration: float = 1e-3) -> JointTrajectory:
 def burst() -> JointTrajectory:
     """The actuator's burst (3 strokes of 80 um), stamp 0."""
     times, pos, vel, acc = sample_waveform(StrokeParams(count=3, amplitude=80e-6), 1, 40)
-    return messages.trajectory(joint_names(1), times, pos, vel, acc, messages.to_time(0.0))
+    return messages.trajectory(joint_names(1), times, pos, vel, acc, stamps.to_time(0.0))
 
 
 def test_time_advances_only_per_step_call_and_per_command(lockstep: LockstepRig) -> None:

@@ -23,17 +23,17 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from visualization_msgs.msg import Marker
 
+from micro_feeder.interface.stamps import to_time
 from micro_feeder.logs.reader import LogReader
 from micro_feeder.nodes._ros import SERVICE_QOS
-from micro_feeder.nodes.actuator import sample_waveform
-from micro_feeder.nodes.commands import parse_trajectory
-from micro_feeder.nodes.messages import to_time
 from micro_feeder.nodes.recorder import Recorder
-from micro_feeder.nodes.resim import resimulate
 from micro_feeder.nodes.simulator import Simulator, topic_qos
-from micro_feeder.nodes.stepper import Stepper, build_model
 from micro_feeder.physics.surface import surface_profile
 from micro_feeder.physics.waveforms import StrokeParams
+from micro_feeder.sim.commands import parse_trajectory
+from micro_feeder.sim.resim import resimulate
+from micro_feeder.sim.stepper import Stepper, build_model
+from micro_feeder.sim.stream import sample_waveform
 
 STEP = 1e-3
 

@@ -1,4 +1,4 @@
-"""The simulator's per-tick state messages are patched CDR templates (nodes/messages.py): what a subscriber
+"""The simulator's per-tick state messages are patched CDR templates (interface/messages.py): what a subscriber
 deserializes must be exactly the observation, tick after tick, for any number of joints."""
 
 from __future__ import annotations
@@ -14,7 +14,8 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from visualization_msgs.msg import Marker, MarkerArray
 
-from micro_feeder.nodes.messages import StateMessages, SurfaceMarkers, header_bytes, seconds, tilt_quaternion, to_time
+from micro_feeder.interface.messages import StateMessages, SurfaceMarkers, header_bytes, tilt_quaternion
+from micro_feeder.interface.stamps import seconds, to_time
 from micro_feeder.physics.dynamics import FeederModel
 
 

@@ -15,13 +15,14 @@ import pytest
 from builtin_interfaces.msg import Duration
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
-from micro_feeder.nodes import messages, trajectory_cdr
-from micro_feeder.nodes.actuator import StrokeStream, sample_waveform
-from micro_feeder.nodes.commands import CommandRejected, joint_names, parse_trajectory
-from micro_feeder.nodes.stepper import Stepper, build_model
+from micro_feeder.interface import messages, stamps, trajectory_cdr
+from micro_feeder.interface.names import joint_names
 from micro_feeder.physics.trajectory import breakpoints, sample_table, table_range
 from micro_feeder.physics.waveforms import StrokeParams, trajectory_table, waveform_table
 from micro_feeder.settings import load_settings
+from micro_feeder.sim.commands import CommandRejected, parse_trajectory
+from micro_feeder.sim.stepper import Stepper, build_model
+from micro_feeder.sim.stream import StrokeStream, sample_waveform
 
 LIMITS = (-200e-6, 200e-6)
 
@@ -58,7 +59,7 @@ def test_simulator_runs_the_configured_schedule_between_knots_too(model, stroke:
     interpolates to the analytic schedule within 1e-12 m at dense instants (every knot interval's
     interior and random times), except inside the ≤ 1.5 ns where the waveform itself jumps in ṡ or s."""
     params = StrokeParams(**stroke)
-    msg = messages.trajectory(joint_names(n), *sample_waveform(params, n), messages.to_time(0.0))
+    msg = messages.trajectory(joint_names(n), *sample_waveform(params, n), stamps.to_time(0.0))
     stepper = Stepper(model if n == 1 else build_model(load_settings(overrides=[
         f'surface.centers={[i * 1e-3 for i in range(n)]}', f'surface.widths={[1e-3] * n}',
         f'stroke.phases={list(params.phases)}'])))
@@ -66,7 +67,7 @@ def test_simulator_runs_the_configured_schedule_between_knots_too(model, stroke:
     stepper.advance(receipt)
     stepper.command_trajectory(parse_trajectory(msg, joint_names(n), LIMITS))
     table = stepper.schedule.table_at(receipt)
-    knots = receipt + np.array([messages.seconds(p.time_from_start) for p in msg.points])
+    knots = receipt + np.array([stamps.seconds(p.time_from_start) for p in msg.points])
     end = receipt + params.burst_end_s()
     rng = np.random.default_rng(0)
     t = np.concatenate([knots[:-1] + np.diff(knots) * f for f in (0.5, 0.25, 0.8, 0.01)] +
@@ -160,7 +161,7 @@ def test_trajectory_overshooting_between_knots_is_refused_and_changes_nothing(mo
     with pytest.raises(CommandRejected, match='between knots'):
         stepper.command_trajectory(parse_trajectory(cubic, ['piezo_0'], LIMITS))
     stepper.command_trajectory(parse_trajectory(messages.trajectory(
-        ['piezo_0'], *sample_waveform(StrokeParams(amplitude=200e-6), 1), messages.to_time(0.0)),
+        ['piezo_0'], *sample_waveform(StrokeParams(amplitude=200e-6), 1), stamps.to_time(0.0)),
         ['piezo_0'], LIMITS))           # a stroke up to the limit itself is accepted
 
 
@@ -192,7 +193,7 @@ def test_positions_only_trajectory_accepted_with_one_warning() -> None:
     code = """
 from builtin_interfaces.msg import Duration
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
-from micro_feeder.nodes.commands import parse_trajectory
+from micro_feeder.sim.commands import parse_trajectory
 msg = JointTrajectory(joint_names=['piezo_0'], points=[
     JointTrajectoryPoint(positions=[p], time_from_start=Duration(nanosec=t))
     for t, p in ((100_000, 1e-5), (200_000, 0.0))])
@@ -218,7 +219,7 @@ def test_a_continuous_stream_over_60_s_stays_bounded_and_seamless() -> None:
         stamp, offsets, knots = stream.next_window()
         assert stamp == previous_end and offsets[0] == 0 and np.all(np.diff(offsets) > 0)
         data = trajectory_cdr.encode(joint_names(4), offsets, knots[0], knots[1], knots[2],
-                                       messages.to_time(stamp * 1e-9))
+                                       stamps.to_time(stamp * 1e-9))
         largest = max(largest, offsets.size)
         biggest = max(biggest, len(data))
         previous_end = stamp + int(offsets[-1])

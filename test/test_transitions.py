@@ -13,8 +13,9 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Header, String
 
-from micro_feeder.nodes.messages import contact_state_bytes
-from micro_feeder.nodes.transitions import TRANSITION_KINDS, TransitionEncoder
+from micro_feeder.interface.messages import contact_state_bytes
+from micro_feeder.interface.names import TRANSITION_KINDS
+from micro_feeder.interface.transitions import TransitionEncoder
 from micro_feeder.physics.dynamics import Event
 
 MODES = ('stuck', 'sliding', 'flying')

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 
 from micro_feeder.cli.resim import verdict
-from micro_feeder.nodes.resim import ResimReport
 from micro_feeder.plots.units import scale
+from micro_feeder.sim.resim import ResimReport
 
 
 def report(max_error: float) -> ResimReport:

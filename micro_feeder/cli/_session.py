@@ -40,8 +40,7 @@ def validate(flat: dict[str, Any], controller: bool = False) -> None:
     """Check the settings the nodes will refuse (the model groups, and the feed controller's goal with
     ``controller``) before a session starts, so that a refused value leaves no log directory behind.
     Raises :class:`CommandError`. Cheap: no contact tables are built."""
-    from ..nodes.parameters import validate_model
-    from ..settings import build_group
+    from ..settings import build_group, validate_model
     try:
         validate_model(flat)
         if controller:
@@ -72,10 +71,11 @@ class RosSession:
     def add(self, build: Callable[[], N]) -> N:
         """Build a node (a refused parameter becomes a :class:`CommandError`) and include it in the spin.
         Build it with ``namespace=session.namespace`` (``--namespace``)."""
+        from ..nodes.spin import NodeRefused
         from ..physics.dynamics import SimulationError
         try:
             node = build()
-        except (ParameterError, ValueError, FileExistsError, SimulationError) as err:
+        except (ParameterError, ValueError, FileExistsError, SimulationError, NodeRefused) as err:
             raise CommandError(str(err)) from err
         self.nodes.append(node)
         if self.viewer is not None:

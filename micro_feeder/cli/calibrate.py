@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
             from ..plots.calibrate import plot_calibration
             values = {p.name: p.value for p in result.parameters}
             recordings = [load_recording(p) for p in args.logs]
-            plot_path = plot_calibration(args.logs, [r.times for r in recordings], [r.poses for r in recordings],
+            plot_path = plot_calibration(args.logs, [r.pose_times for r in recordings], [r.poses for r in recordings],
                                          [resimulate_poses(p, start) for p in args.logs],
                                          [resimulate_poses(p, values) for p in args.logs], values,
                                          Path(args.plot) if args.plot else out / 'calibrate.png')

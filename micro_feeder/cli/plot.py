@@ -23,7 +23,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..logs.plot import plot_log  # matplotlib only when plotting
+    from ..plots.log import plot_log  # matplotlib only when plotting
 
     log = open_log(args.log)
     try:

@@ -63,8 +63,8 @@ def verdict(report: Any, tolerance: float, source: str) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    from ..nodes.parameters import model_specs
-    from ..nodes.resim import ResimError, resimulate  # the Stepper: numba kernel, message packages
+    from ..settings import model_specs
+    from ..sim.resim import ResimError, resimulate  # the Stepper: numba kernel, message packages
 
     model = model_specs()
     overrides = settings_from_args(args)

@@ -1,7 +1,7 @@
 """Fitting model parameters to recorded runs: least squares on the re-simulated part trajectory.
 
-A log's recorded commands are re-applied to a fresh simulation exactly as ``resim`` does (its stop
-times, command receipts and the simulator's own command checks, from :mod:`micro_feeder.nodes.resim`);
+A log's recorded commands are re-applied to a fresh simulation by the replay loop ``resim`` uses (its stop
+times, command receipts and the simulator's own command checks: :mod:`micro_feeder.sim.replay`);
 the residuals are the differences between the re-simulated and the recorded part position (x, z) at
 every recorded pose, over every log. scipy.optimize.least_squares ('trf', bounds) works on the
 parameters divided by their starting values, so that a mass of 1e-9 kg and a friction factor of 0.01
@@ -18,8 +18,9 @@ not separately identifiable.
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 from typing import Any
@@ -27,11 +28,10 @@ from typing import Any
 import numpy as np
 
 from ..logs.reader import LogReader
-from ..logs.sim_parameters import recorded_parameters
-from ..nodes.parameters import model_specs
-from ..nodes.resim import _apply, _Command, _commands, _first_segment, _Stop, stop_times
-from ..nodes.stepper import Stepper, build_model
-from ..physics.dynamics import SimulationError
+from ..physics.dynamics import Observation
+from ..settings import model_specs
+from ..sim.replay import Recording, ReplayError, Stop, read_recording, replay
+from ..sim.stepper import Stepper, build_model
 from .runners import Runner
 
 DIFF_STEP = 1e-4           # forward-difference step, relative to each parameter's start
@@ -44,82 +44,33 @@ class CalibrationError(ValueError):
     """The fit cannot start (no pose in a log, unknown parameter, a start of zero ...); says why."""
 
 
-@dataclass(frozen=True)
-class Recording:
-    """What a log gives the fit, independent of the parameters: the recorded model parameters, the
-    simulator's stops with the recorded poses, and the commands with their receipt times."""
-
-    path: str
-    flat: dict[str, Any]
-    stops: list[_Stop]
-    commands: list[_Command]
-    notes: list[str]
-
-    @property
-    def poses(self) -> np.ndarray:
-        """(n, 2) recorded (x, z) in m."""
-        return np.array([s.pose for s in self.stops if s.pose is not None])
-
-    @property
-    def times(self) -> np.ndarray:
-        """(n,) sim times of the recorded poses (s)."""
-        return np.array([s.t for s in self.stops if s.pose is not None])
-
-
 @lru_cache(maxsize=16)
 def load_recording(path: str) -> Recording:
     """Read a log once per process (the workers cache it too)."""
-    log = LogReader(path)
-    specs = model_specs()
-    snapshots = recorded_parameters(log)
-    notes: list[str] = []
-    if not snapshots:
+    try:
+        rec = read_recording(LogReader(path))
+    except ReplayError as err:
+        raise CalibrationError(f'{path}: {err} to fit') from err
+    notes = [f'{path}: {note}' for note in rec.notes]
+    if not rec.snapshots:
         notes.append(f'{path}: no simulator/parameters recorded, defaults assumed')
-    flat = {name: value for name, value in (snapshots[0] if snapshots else {}).items() if name in specs}
-    pose_msgs = list(log.messages(['particle/pose']))
-    poses, reset = _first_segment([(m.publish_time_ns, m) for m in pose_msgs])
-    if not poses:
-        raise CalibrationError(f'{path}: no particle/pose to fit')
-    if reset:
-        notes.append(f'{path}: only the run before the first simulator/reset is fitted')
-    step_periods = sorted({float(s['step_period']) for s in snapshots if 'step_period' in s}) or [1e-3]
-    stops, _ = stop_times([(ns, m.message.pose.position.x, m.message.pose.position.z) for ns, m in poses],
-                          step_periods)
-    commands, _ = _commands(log, [(m.log_time_ns, m.publish_time_ns) for m in pose_msgs], notes)
-    return Recording(path, flat, stops, sorted(commands, key=lambda c: c.receipt_ns), notes)
+    return dataclasses.replace(rec, notes=notes)
 
 
 def resimulate_poses(path: str, changes: Mapping[str, float]) -> np.ndarray:
     """Re-simulated (x, z) at each recorded pose of the log at ``path`` with ``changes`` applied; poses
     after a failure of the integration are NaN."""
     rec = load_recording(path)
-    stepper = Stepper(build_model({**rec.flat, **changes}))
-    out = np.full((len(rec.poses), 2), np.nan)
-    pending: Iterator[_Command] = iter(rec.commands)
-    command = next(pending, None)
-    i = 0
-    try:
-        for stop in rec.stops:                # as resim does: commands received before the stop, the stop,
-            while command is not None and command.receipt_ns < stop.ns:   # then those received at it
-                _advance(stepper, command.receipt_ns / 1e9)
-                _apply(stepper, command)
-                command = next(pending, None)
-            _advance(stepper, stop.t)
-            if stop.pose is not None:
-                obs = stepper.observe()
-                out[i] = obs.x, obs.z
-                i += 1
-            while command is not None and command.receipt_ns == stop.ns:
-                _apply(stepper, command)
-                command = next(pending, None)
-    except SimulationError:
-        pass
+    out = np.full((len(rec.posed_stops), 2), np.nan)
+    filled = 0
+
+    def keep(_stop: Stop, obs: Observation) -> None:
+        nonlocal filled
+        out[filled] = obs.x, obs.z
+        filled += 1
+
+    replay(Stepper(build_model({**rec.flat, **changes})), rec, keep)
     return out
-
-
-def _advance(stepper: Stepper, t: float) -> None:
-    if t != stepper.t:
-        stepper.advance(t)
 
 
 def residuals(path: str, changes: Mapping[str, float]) -> np.ndarray:

@@ -14,13 +14,14 @@ from dataclasses import dataclass
 from functools import lru_cache
 from typing import Any
 
+from ..interface.names import TRANSITION_KINDS
 from ..physics.dynamics import FeederModel, SimulationError
 from ..physics.parameters import ParameterError
 
 REGIMES = ('stuck', 'slides', 'flies')
 # Parameters whose change needs new contact tables; every other change reuses the base model's.
 CONTACT_INPUTS = ('contact.', 'particle.mass', 'particle.area', 'gravity')
-COUNTERS = ('stick_to_slip', 'slip_to_stick', 'take_off', 'landing')
+COUNTERS = TRANSITION_KINDS
 RESULT_COLUMNS = ('distance_m', 'distance_per_stroke_m', 'settled', 'regime', 'final_mode', 'final_offset_m',
                   *COUNTERS, 'max_speed_mps', 'sim_time_s', 'error')
 

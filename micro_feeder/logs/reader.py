@@ -30,9 +30,10 @@ from typing import Any
 from mcap.records import Channel, Message, Schema
 from mcap_ros2.decoder import DecoderFactory
 
+from ..interface.stamps import header_stamp_ns
 from .mcap_file import Damage, McapFile, NotMcapError
 from .metadata import LogFormatError, read_file_list
-from .writer import RECORDER_METADATA, header_stamp_ns
+from .writer import RECORDER_METADATA
 
 __all__ = ['DamagedLogWarning', 'LogFormatError', 'LogMessage', 'LogReader', 'LogTopic', 'LogWarning',
            'TruncatedLogWarning']

@@ -15,9 +15,8 @@ from typing import Any
 
 import numpy as np
 
+from ..interface.names import MODES
 from .reader import LogReader
-
-MODES = ('stuck', 'sliding', 'flying')
 
 
 @dataclass

@@ -5,7 +5,7 @@ commands say exactly what the simulator was told: each ``actuator/trajectory`` (
 the simulator does, quintic/cubic/linear Hermite, :func:`~micro_feeder.physics.waveforms.trajectory_table`)
 and each ``actuator/command`` set-point, applied from the sim time the simulator received it
 (``simulator/command_receipts``; the i-th receipt naming a topic belongs to the i-th message on it) or
-from its stamp when that is later (joint_trajectory_controller semantics, as ``nodes.stepper``). Without
+from its stamp when that is later (joint_trajectory_controller semantics, as ``sim.stepper``). Without
 receipts the receive time is mapped onto sim time through the poses. These are commanded strokes: a
 command the simulator refused would still be drawn, and with ``piezo.*`` dynamics on the actual stroke
 lags the command.
@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from ..interface.stamps import stamp_ns
 from ..physics.waveforms import StrokeSchedule, trajectory_table
 from .reader import LogReader
 
@@ -38,10 +39,6 @@ class CommandedStrokes:
         return np.array([self.schedule.evaluate(float(ti))[0] for ti in np.atleast_1d(t)]).reshape(-1, self.n_actuators)
 
 
-def _ns(stamp: Any) -> int:
-    return stamp.sec * 1_000_000_000 + stamp.nanosec
-
-
 def commanded_strokes(log: LogReader, n_actuators: int, pose_log_t: np.ndarray, pose_t: np.ndarray
                       ) -> CommandedStrokes | None:
     """The strokes the log's commands describe, or None when it recorded no command. ``pose_log_t`` /
@@ -52,7 +49,7 @@ def commanded_strokes(log: LogReader, n_actuators: int, pose_log_t: np.ndarray, 
     receipts: dict[str, list[float]] = defaultdict(list)
     if log.resolve('simulator/command_receipts') is not None:
         for m in log.messages(['simulator/command_receipts']):
-            receipts[m.message.frame_id].append(_ns(m.message.stamp) * 1e-9)
+            receipts[m.message.frame_id].append(stamp_ns(m.message.stamp) * 1e-9)
     commands = []
     for topic in topics:
         for i, m in enumerate(log.messages([topic])):
@@ -80,7 +77,7 @@ def _apply(strokes: CommandedStrokes, received: float, topic: str, msg: Any) -> 
             strokes.schedule.replace_from(received, trajectory_table([received], values[None, :]))
             strokes.active.append((received, received))
         return
-    stamp = _ns(msg.header.stamp) * 1e-9
+    stamp = stamp_ns(msg.header.stamp) * 1e-9
     start = stamp if stamp > received else received
     if not msg.points:
         strokes.schedule.hold_from(start)
@@ -99,7 +96,7 @@ def _apply(strokes: CommandedStrokes, received: float, topic: str, msg: Any) -> 
         return values
 
     base = start if stamp == 0.0 else stamp
-    knots = base + np.array([_ns(p.time_from_start) * 1e-9 for p in points])
+    knots = base + np.array([stamp_ns(p.time_from_start) * 1e-9 for p in points])
     strokes.schedule.command_trajectory(start, knots, columns('positions'), columns('velocities'),
                                         columns('accelerations'))
     strokes.active.append((start, float(knots[-1])))

@@ -9,7 +9,6 @@ process loses at most that much. :meth:`LogWriter.close` writes the MCAP summary
 
 from __future__ import annotations
 
-import struct
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +17,7 @@ from typing import BinaryIO
 from mcap.well_known import MessageEncoding, Profile, SchemaEncoding
 from mcap.writer import CompressionType, Writer
 
+from ..interface.stamps import header_stamp_ns
 from .metadata import BagMetadata, FileInfo, TopicInfo
 from .schemas import has_header, normalize_type, schema_text
 
@@ -25,13 +25,6 @@ RECORDER_METADATA = 'micro_feeder.recorder'
 LIBRARY = 'micro_feeder'
 CHUNK_SIZE = 1 << 20
 SIZE_CHECK_EVERY = 1000  # messages between two checks of the file size for splitting
-
-
-def header_stamp_ns(data: bytes) -> int:
-    """``header.stamp`` [ns] of a CDR message whose first field is a ``std_msgs/Header``."""
-    fmt = '<iI' if data[1] == 1 else '>iI'  # encapsulation: 0x0001 = little-endian CDR
-    sec, nanosec = struct.unpack_from(fmt, data, 4)
-    return max(0, sec * 1_000_000_000 + nanosec)
 
 
 @dataclass

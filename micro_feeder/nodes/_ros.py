@@ -19,8 +19,8 @@ from rclpy.executors import Executor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 
+from ..interface.topics import TOPICS_BY_NAME
 from ..logs.metadata import qos_profile
-from ..logs.topics import TOPICS_BY_NAME
 
 SPIN_SLICE = 0.1  # s: longest delay between a signal and the spin loop noticing it
 
@@ -90,7 +90,7 @@ def status_name(node: Any, what: str) -> str:
 
 def topic_qos(name: str, min_depth: int = 0) -> QoSProfile:
     """The QoS of a micro_feeder topic (docs/interface.md; relative name, e.g. ``particle/pose``) from the shared table
-    (logs/topics.py), with a history at least ``min_depth`` deep."""
+    (interface/topics.py), with a history at least ``min_depth`` deep."""
     spec = TOPICS_BY_NAME[name]
     reliability = ReliabilityPolicy.RELIABLE if spec.reliable else ReliabilityPolicy.BEST_EFFORT
     durability = DurabilityPolicy.TRANSIENT_LOCAL if spec.transient_local else DurabilityPolicy.VOLATILE

@@ -19,8 +19,6 @@ burst's length.
 
 from __future__ import annotations
 
-import dataclasses
-import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -36,13 +34,14 @@ from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
+from ..interface import stamps, trajectory_cdr
+from ..interface.names import joint_names
 from ..physics.parameters import ParamSpec
-from ..physics.trajectory import burst_end_ns, max_spacing, table_knots, waveform_knots
-from ..physics.waveforms import StrokeParams, waveform_table
-from . import messages, trajectory_cdr
+from ..physics.waveforms import StrokeParams
+from ..settings import model_specs
+from ..sim.stream import StrokeStream, encoded_window, points_per_message, sample_waveform
 from ._ros import topic_qos
-from .commands import joint_names
-from .parameters import check_changes, declare, model_specs, values
+from .parameters import check_changes, declare, values
 from .spin import spin_node
 
 NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
@@ -57,77 +56,7 @@ NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
     'stream.lead': (ParamSpec('a streamed burst is kept scheduled this far ahead of sim time', 's', gt=0, le=10.0),
                     0.2),
 }
-MESSAGE_BYTES = 256 * 1024     # a trajectory message's knots take at most this many bytes (whatever the joints)
 COUNT_SPEC = ParamSpec('number of strokes in the burst; 0 = strokes until ~/stop (streamed)', kind='int', ge=0)
-
-
-def sample_waveform(params: StrokeParams, n_actuators: int, knots_per_stroke: int = 0
-                    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Knots of the whole burst: times (s from its start, whole ns) and (n, actuators) s (m), ṡ (m/s),
-    s̈ (m/s²), at least ``knots_per_stroke`` per stroke period (see :func:`waveform_knots`)."""
-    return waveform_knots(params, n_actuators, min_knots_per_stroke=knots_per_stroke)
-
-
-def points_per_message(max_points: int, n_actuators: int) -> int:
-    """Knots in one trajectory message: ``max_points``, fewer when that many would exceed
-    :data:`MESSAGE_BYTES` (64 actuators: 169 knots), so that a message stays far below the simulator's
-    ``max_command_bytes`` (1 MiB) however many joints it carries."""
-    return max(2, min(max_points, MESSAGE_BYTES // trajectory_cdr.point_bytes(n_actuators)))
-
-
-class StrokeStream:
-    """The windows of a streamed burst (pure: no ROS). Times in integer nanoseconds of sim time.
-
-    ``origin_ns``: sim time at which the burst's time 0 falls; :meth:`next_window` returns the knots of the
-    next window, starting where the previous one ended. ``count`` 0 = endless.
-    """
-
-    def __init__(self, params: StrokeParams, count: int, n_actuators: int, origin_ns: int, *,
-                 window: float, max_points: int, knots_per_stroke: int):
-        self.params, self.count, self.n_actuators = params, count, n_actuators
-        self.origin_ns = origin_ns
-        self.sent_ns = 0                                   # burst time up to which knots were sent
-        self.end_ns = burst_end_ns(dataclasses.replace(params, count=count)) if count else None
-        self._window_ns = max(round(window * 1e9), 1)
-        self._max_points = points_per_message(max_points, n_actuators)
-        self._max_spacing = max_spacing(params, knots_per_stroke)
-
-    @property
-    def done(self) -> bool:
-        return self.end_ns is not None and self.sent_ns >= self.end_ns
-
-    @property
-    def scheduled_until(self) -> float:
-        """Sim time (s) up to which the strokes are scheduled."""
-        return (self.origin_ns + self.sent_ns) * 1e-9
-
-    def next_window(self) -> tuple[int, np.ndarray, np.ndarray]:
-        """(stamp in ns of sim time, knot offsets from the stamp in ns, (3, n, actuators) s, ṡ, s̈)."""
-        start = self.sent_ns
-        stop = start + self._window_ns if self.end_ns is None else min(start + self._window_ns, self.end_ns)
-        table = waveform_table(self._strokes_through(stop), self.n_actuators)
-        ns, values = table_knots(table, start * 1e-9, stop * 1e-9, max_spacing=self._max_spacing)
-        if ns.size > self._max_points:       # cut at a message's knots; later windows are made that long
-            ns, values = ns[:self._max_points], values[:, :self._max_points]
-            self._window_ns = max(int(ns[-1]) - start, 1)
-        self.sent_ns = int(ns[-1])
-        return self.origin_ns + start, ns - start, values
-
-    def _strokes_through(self, stop_ns: int) -> StrokeParams:
-        """The burst's parameters with enough strokes to cover burst time ``stop_ns`` (endless: a count
-        that grows with time, so a table stays a few strokes long relative to the window)."""
-        if self.count:
-            return dataclasses.replace(self.params, count=self.count)
-        p = self.params
-        needed = math.floor((stop_ns * 1e-9 - p.delay) / p.period_s) + 2 + math.ceil(max(p.phases))
-        return dataclasses.replace(p, count=max(needed, 1))
-
-
-def _encoded_window(stream: StrokeStream) -> bytes:
-    """The stream's next window as a serialized JointTrajectory stamped at its start."""
-    stamp_ns, offsets_ns, knots = stream.next_window()
-    return trajectory_cdr.encode(joint_names(stream.n_actuators), offsets_ns, knots[0], knots[1], knots[2],
-                                 messages.to_time(stamp_ns * 1e-9))
 
 
 class Actuator(Node):
@@ -161,7 +90,7 @@ class Actuator(Node):
         """Build and encode one window of the configured strokes, unsent: the first call loads the compiled
         waveform code (0.2-0.7 s), which inside the first streamed window let sim time pass the strokes
         scheduled (an underrun at every start)."""
-        _encoded_window(self._new_stream(0.0))
+        encoded_window(self._new_stream(0.0))
 
     # -- the burst ------------------------------------------------------------------------------------
 
@@ -238,13 +167,13 @@ class Actuator(Node):
                                       f'(until {stream.scheduled_until:.6f} s); raise stream.lead',
                                       throttle_duration_sec=5.0)
         while not stream.done and stream.scheduled_until < now + lead:
-            self._pub.publish(_encoded_window(stream))
+            self._pub.publish(encoded_window(stream))
             self.windows += 1
         if stream.done:
             self._stream = None
 
     def _on_sim_time(self, data: bytes) -> None:
-        self.sim_time = messages.header_stamp(data)
+        self.sim_time = stamps.header_stamp(data)
         if self._pending_stream:
             self._start_stream(self.sim_time)
         elif self._stream is not None:

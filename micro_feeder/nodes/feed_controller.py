@@ -34,13 +34,14 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from ..control.feed_planner import Burst, FeedGoal, FeedPlanner
+from ..interface import messages, stamps
+from ..interface.names import joint_names
 from ..physics.parameters import ParamSpec
 from ..physics.waveforms import StrokeParams
-from . import messages
+from ..settings import model_specs
+from ..sim.stream import sample_waveform
 from ._ros import status_name, topic_qos
-from .actuator import sample_waveform
-from .commands import joint_names
-from .parameters import declare, model_specs, values
+from .parameters import declare, values
 from .spin import spin_node
 
 NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
@@ -127,7 +128,7 @@ class FeedController(Node):
             del self._poses[old]
         for old in [k for k in self._twists if k < key]:
             del self._twists[old]
-        self._decide(messages.seconds(pose.header.stamp), pose.pose.position.x, twist)
+        self._decide(stamps.seconds(pose.header.stamp), pose.pose.position.x, twist)
 
     # -- control -------------------------------------------------------------------------------------
 
@@ -179,7 +180,7 @@ class FeedController(Node):
         n = len(stroke.phases)
         msg = messages.trajectory(joint_names(n), *sample_waveform(stroke, n, self._knots), Time())
         start = t if self._lockstep else t + self._lead + (time.perf_counter() - building)
-        msg.header.stamp = messages.to_time(start)
+        msg.header.stamp = stamps.to_time(start)
         self._burst, self._burst_from_x = burst, x
         self._quiet_after = start + stroke.burst_end_s() + self._settle
         self.send(msg)
@@ -232,7 +233,7 @@ class FeedController(Node):
         status = DiagnosticStatus(name=status_name(self, 'feed'), hardware_id='micro_feeder', level=level,
                                   message=self.status_text(),
                                   values=[KeyValue(key=k, value=str(v)) for k, v in self.result().items()])
-        self._pub_diag.publish(DiagnosticArray(header=Header(stamp=messages.to_time(self.last_t)),
+        self._pub_diag.publish(DiagnosticArray(header=Header(stamp=stamps.to_time(self.last_t)),
                                                status=[status]))
 
 

@@ -19,13 +19,8 @@ from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescri
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
-from ..physics.parameters import ParameterError, ParameterGroup, ParamSpec, all_specs
-from ..physics.surface import SurfaceParams
-from ..physics.waveforms import StrokeParams, waveform_table
-from ..settings import PARAMETER_GROUPS, known_parameters
-
-# Every model parameter group (the namespace of config/feeder.yaml and --set).
-MODEL_GROUPS: tuple[type[ParameterGroup], ...] = tuple(PARAMETER_GROUPS)
+from ..physics.parameters import ParameterError, ParameterGroup, ParamSpec
+from ..settings import MODEL_GROUPS, known_parameters, validate_model
 
 SpecTable = Mapping[str, tuple[ParamSpec, Any]]
 
@@ -33,12 +28,6 @@ _ROS_TYPES = {'float': ParameterType.PARAMETER_DOUBLE, 'int': ParameterType.PARA
               'bool': ParameterType.PARAMETER_BOOL, 'str': ParameterType.PARAMETER_STRING,
               'float_list': ParameterType.PARAMETER_DOUBLE_ARRAY}
 _INT64 = 2 ** 63 - 1
-
-
-def model_specs(groups: Iterable[type[ParameterGroup]] = MODEL_GROUPS) -> dict[str, tuple[ParamSpec, Any]]:
-    """``{dotted name: (spec, default)}`` of the model parameters (defaults as ROS values: lists, not tuples)."""
-    return {name: (spec, list(default) if isinstance(default, tuple) else default)
-            for name, (spec, default) in all_specs(list(groups)).items()}
 
 
 def descriptor(name: str, spec: ParamSpec) -> ParameterDescriptor:
@@ -117,14 +106,6 @@ def values(node: Node, names: Iterable[str]) -> dict[str, Any]:
         value = node.get_parameter(name).value
         out[name] = list(value) if isinstance(value, (list, tuple)) or hasattr(value, 'tolist') else value
     return out
-
-
-def validate_model(flat: Mapping[str, Any], groups: Sequence[type[ParameterGroup]] = MODEL_GROUPS) -> None:
-    """Check a whole flat model mapping without building the contact tables: every group, and one
-    stroke phase per actuator when both groups are present. Raises :class:`ParameterError`."""
-    built = {group: group.from_flat(flat) for group in groups}
-    if SurfaceParams in built and StrokeParams in built:
-        waveform_table(built[StrokeParams], built[SurfaceParams].n_actuators)
 
 
 def check_changes(table: SpecTable, current: Mapping[str, Any], changes: Sequence[Parameter],

@@ -36,10 +36,10 @@ from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from std_srvs.srv import Trigger
 
+from ..interface.topics import TOPICS, TOPICS_BY_NAME
 from ..logs.metadata import dump_qos
 from ..logs.reader import LogReader
 from ..logs.summary import format_summary, summarize
-from ..logs.topics import TOPICS, TOPICS_BY_NAME
 from ..logs.writer import LogWriter
 from ._ros import SERVICE_QOS, message_class, qos_to_dict, spin_until, topic_qos
 from .spin import init_ros

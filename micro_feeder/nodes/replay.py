@@ -37,9 +37,9 @@ from rclpy.task import Future
 from rosgraph_msgs.msg import Clock
 from std_srvs.srv import SetBool
 
+from ..interface.stamps import header_stamp_ns
 from ..logs.metadata import parse_qos, read_qos_overrides
 from ..logs.reader import LogMessage, LogReader
-from ..logs.writer import header_stamp_ns
 from ..progress import Progress
 from ._ros import StopFlag, message_class, qos_from_dict, spin_until
 

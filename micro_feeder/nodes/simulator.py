@@ -1,4 +1,5 @@
-"""The ``simulator`` node: the real-time loop of docs/interface.md around the physics stepper.
+"""The ``simulator`` node: the real-time loop of docs/interface.md around the simulation core's
+:class:`~micro_feeder.sim.stepper.Stepper`.
 
 A thin rclpy shell over rclpy-free parts: the wall-clock loop thread (:mod:`micro_feeder.realtime.loop`)
 ticks at ``publish_rate`` and advances sim time by elapsed wall time × ``real_time_factor`` (0: as fast as
@@ -8,14 +9,14 @@ coalesces superseded ones and throttles refusal logs; the ``/diagnostics`` arith
 :func:`micro_feeder.realtime.diagnostics.loop_status`. One lock serialises everything that touches the
 stepper or publishes state, so a command, a step or a reset happens between two ticks, never inside one.
 
-Commands on ``actuator/trajectory`` / ``actuator/command`` are checked (:mod:`.commands`) and applied
+Commands on ``actuator/trajectory`` / ``actuator/command`` are checked (:mod:`micro_feeder.sim.commands`) and applied
 by their stamps in sim time, so a paused run advanced with ``~/step`` is repeatable bit for bit. With
 ``lockstep`` the wall clock never advances sim time (there is no loop thread): each ``~/step`` call and
 each command message received grants one ``step_period`` (the command is applied first). Model
 parameters can be set at any time and are applied on ``~/reset``; ``real_time_factor`` and
 ``step_period`` apply at once (the on-set callback only validates; the post-set callback applies).
 
-For ``resim`` (:mod:`.resim`) a log must say what the simulator did with each command: the parameters in
+For ``resim`` (:mod:`micro_feeder.sim.resim`) a log must say what the simulator did with each command: the parameters in
 force go out on the latched ``~/parameters`` and every command received, applied or refused, is
 acknowledged on ``~/command_receipts`` with the sim time it was received at.
 """
@@ -37,7 +38,6 @@ from rcl_interfaces.msg import ParameterEvent, SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.serialization import deserialize_message
 from rclpy.task import Future
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
@@ -46,18 +46,20 @@ from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
+from ..interface import messages, stamps, wire
+from ..interface.names import joint_names
+from ..interface.transitions import TransitionEncoder
 from ..physics.dynamics import Event, SimulationError
 from ..physics.parameters import ParameterError, ParamSpec
 from ..realtime.diagnostics import LoopSnapshot, achieved_rtf, loop_status
 from ..realtime.intake import CommandIntake, IntakeCounters, Outcome, Received, ThrottledLog, plan
 from ..realtime.loop import GIL_SWITCH_INTERVAL, TickLoop
-from . import messages
+from ..settings import model_specs
+from ..sim.commands import parse_setpoints, parse_trajectory, parse_trajectory_cdr, start_time
+from ..sim.stepper import Stepper, build_model
 from ._ros import SERVICE_QOS, status_name, topic_qos
-from .commands import joint_names, parse_setpoints, parse_trajectory, parse_trajectory_cdr, start_time
-from .parameters import check_changes, declare, model_specs, values
-from .spin import spin_node
-from .stepper import Stepper, build_model
-from .transitions import TransitionEncoder
+from .parameters import check_changes, declare, values
+from .spin import NodeRefused, spin_node
 
 NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
     'publish_rate': (ParamSpec('rate of the loop timer and of the state topics', 'Hz', gt=0, le=10000,
@@ -92,6 +94,13 @@ COMMAND_TYPES = {'actuator/trajectory': JointTrajectory, 'actuator/command': Flo
 CDR_PARSE_BYTES = 8192
 
 
+class DuplicateSimulator(NodeRefused):
+    """Another simulator already publishes this one's state topics (same name and namespace): refused."""
+
+
+DUPLICATE_DISCOVERY_S = 0.5   # s after the node is created that the graph is watched for an older simulator
+
+
 class Busy(Exception):
     """The simulator's lock could not be taken in time: a tick (or a large command) is still working."""
 
@@ -108,6 +117,12 @@ class Simulator(Node):
         """``hold``: the wall-clock loop waits at t = 0 until :meth:`resume` (``micro-feeder run`` holds it
         until its actuator and recorder are there), whatever ``start_paused`` says."""
         super().__init__('simulator', **kwargs)
+        created = time.monotonic()
+        self.started_at_ns = time.time_ns()     # tells this simulator from a twin of its name (older one wins)
+        self.twins: set[int] = set()            # older live simulators of this name seen (their start times)
+        self.refusal = ''                       # why this node must not run on this graph (spin_node exits 2)
+        self._twin_watch = self.create_subscription(ParameterEvent, '~/parameters', self._on_twin_parameters,
+                                                    topic_qos('simulator/parameters'))
         # First, what destroy_node() needs: rclpy destroys a node whose construction failed below (a refused
         # parameter) at shutdown, and that must not end in an AttributeError hiding the reason.
         self._loop: TickLoop | None = None
@@ -135,6 +150,7 @@ class Simulator(Node):
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
 
+        self._refuse_twin(created)
         self._pub_pose = self._publisher(PoseStamped, 'particle/pose')
         self._pub_twist = self._publisher(TwistStamped, 'particle/twist')
         self._pub_wrench = self._publisher(WrenchStamped, 'particle/contact_wrench')
@@ -176,6 +192,36 @@ class Simulator(Node):
         if not self._lockstep:
             self._loop = TickLoop(self._period, self._tick, self._loop_failed)
             self._set_paused(self._user_paused or hold)
+
+    def _refuse_twin(self, created: float) -> None:
+        """Raise :class:`DuplicateSimulator` when a live simulator of this name (same node name and namespace)
+        is on the graph: its latched ``~/parameters`` arrives within :data:`DUPLICATE_DISCOVERY_S` of this
+        node's creation (read by hand: no executor spins the node yet, and this one has published nothing).
+        A dead one's leftover graph entries send nothing, so a restart is not refused. Slower discovery is
+        caught later by :meth:`_on_twin_parameters`."""
+        while True:
+            taken = self._twin_watch.handle.take_message(ParameterEvent, False)
+            if taken is not None:
+                raise DuplicateSimulator(self._twin_message(taken[0].node))
+            if time.monotonic() - created >= DUPLICATE_DISCOVERY_S:
+                return
+            time.sleep(0.02)
+
+    def _twin_message(self, node: str) -> str:
+        return (f'another simulator named {node} is running: two simulators in one namespace would mix their '
+                'states, commands and logs. Start this one in its own namespace (--ros-args -r __ns:=/feeder2, '
+                'or micro-feeder run --namespace feeder2), or stop the other')
+
+    def _on_twin_parameters(self, msg: ParameterEvent) -> None:
+        """``~/parameters`` of a simulator of this name: this node's own (same ``started_at_ns``), a newer twin
+        (it stops itself on this node's event), or an older one that discovery showed too late for
+        :meth:`_refuse_twin`: this node then stops as on a failure, with the reason."""
+        started = next((p.value.integer_value for p in msg.new_parameters if p.name == 'started_at_ns'), 0)
+        if started == self.started_at_ns or started > self.started_at_ns or started in self.twins:
+            return
+        self.twins.add(started)
+        self.refusal = self._twin_message(msg.node)
+        self._fail(self.refusal)
 
     def _publisher(self, msg_type: type, topic: str, name: str | None = None) -> Any:
         return self.create_publisher(msg_type, name or topic, topic_qos(topic))
@@ -365,7 +411,7 @@ class Simulator(Node):
     def _on_command(self, topic: str, data: bytes) -> None:
         """Subscription callback (executor thread): queue the serialized message; the intake does the rest."""
         self.commands.received += 1
-        stamp = messages.header_stamp(data) if topic == 'actuator/trajectory' else 0.0
+        stamp = stamps.header_stamp(data) if topic == 'actuator/trajectory' else 0.0
         self._intake.submit(Received(topic, data, stamp))
 
     def _parse(self, received: Received) -> tuple[str, Any]:
@@ -375,7 +421,7 @@ class Simulator(Node):
         if received.topic == 'actuator/trajectory' and len(received.data) > CDR_PARSE_BYTES:
             return received.topic, parse_trajectory_cdr(received.data, joints, stepper.limits)
         try:
-            msg = deserialize_message(received.data, COMMAND_TYPES[received.topic])
+            msg = wire.deserialize(received.data, COMMAND_TYPES[received.topic])
         except Exception as err:  # rclpy raises several types for malformed bytes
             raise ValueError(f'{received.topic}: cannot deserialize: {err}') from err
         if received.topic == 'actuator/trajectory':
@@ -549,8 +595,9 @@ class Simulator(Node):
         """The parameters in force on the latched ``~/parameters``, stamped with the sim time: the model's
         as last applied (not a change waiting for reset) and the node's current ones."""
         self._pub_parameters.publish(ParameterEvent(
-            stamp=messages.to_time(self._stepper.t), node=self.get_fully_qualified_name(),
-            new_parameters=self._model_parameters + self._parameter_msgs(NODE_SPECS)))
+            stamp=stamps.to_time(self._stepper.t), node=self.get_fully_qualified_name(),
+            new_parameters=[*self._model_parameters, *self._parameter_msgs(NODE_SPECS),
+                            Parameter('started_at_ns', value=self.started_at_ns).to_parameter_msg()]))
 
     def diagnostics(self) -> DiagnosticStatus:
         """The simulator's status (:func:`loop_status`): achieved real-time factor over the time since the
@@ -570,7 +617,8 @@ class Simulator(Node):
             overruns=self.overruns, tick_age=loop.timing.tick_age(now) if loop is not None else 0.0,
             steps_granted=self.steps_granted, states_published=self.states_published,
             pending_reset=self._model_pending, transitions=state.transitions,
-            intake=self.commands.as_items()))
+            intake=self.commands.as_items(),
+            other_simulators=len(self.twins)))
         if status.level != 0:
             self.get_logger().warning(status.message, throttle_duration_sec=10.0)
         return DiagnosticStatus(name=status_name(self, 'loop'), hardware_id='micro_feeder',
@@ -580,7 +628,7 @@ class Simulator(Node):
     def _publish_diagnostics(self) -> None:
         self._log_refusals(self._refusal_log.flush())
         self._log_refusals(self._late_log.flush())
-        self._pub_diag.publish(DiagnosticArray(header=Header(stamp=messages.to_time(self._stepper.t)),
+        self._pub_diag.publish(DiagnosticArray(header=Header(stamp=stamps.to_time(self._stepper.t)),
                                                status=[self.diagnostics()]))
 
 

@@ -77,6 +77,10 @@ def build_interruptibly(factory: Callable[[], Node], stop: StopFlag) -> Node | N
     return result['node']
 
 
+class NodeRefused(RuntimeError):
+    """A node that will not run on this graph (e.g. a second simulator in one namespace); says why."""
+
+
 def spin_node(name: str, factory: Callable[[], Node], args: list[str] | None = None) -> int:
     """Console-script main: ``rclpy.init(args)`` (``--ros-args`` parsed by rcl), build the node, spin it
     until SIGINT/SIGTERM. A refused parameter value exits with status 2 and the reason on stderr, and so
@@ -87,7 +91,7 @@ def spin_node(name: str, factory: Callable[[], Node], args: list[str] | None = N
     announce_kernel_compiles(get_logger(name).info)
     try:
         node = build_interruptibly(factory, stop)
-    except (ParameterError, SimulationError) as err:
+    except (ParameterError, SimulationError, NodeRefused) as err:
         print(f'{name}: error: {err}', file=sys.stderr)
         rclpy.try_shutdown()
         return 2
@@ -96,8 +100,12 @@ def spin_node(name: str, factory: Callable[[], Node], args: list[str] | None = N
         sys.stderr.flush()
         os._exit(0)     # the half-built node still runs compiled code on its thread: nothing to clean up
     try:
-        spin_nodes([node], lambda: bool(stop))
+        spin_nodes([node], lambda: bool(stop) or bool(getattr(node, 'refusal', '')))
     finally:
         node.destroy_node()
         rclpy.try_shutdown()
+    refusal = getattr(node, 'refusal', '')
+    if refusal:
+        print(f'{name}: error: {refusal}', file=sys.stderr)
+        return 2
     return 0

@@ -1,5 +1,5 @@
 """Figures of offline runs: one run's history (strokes, velocity, friction, displacement, height, mode); the
-panel helpers are shared with the log plot (logs/plot.py)."""
+panel helpers are shared with the log plot (plots/log.py)."""
 
 from __future__ import annotations
 

@@ -33,6 +33,7 @@ class LoopSnapshot:
     pending_reset: bool
     transitions: Mapping[str, int]
     intake: Mapping[str, str]
+    other_simulators: int = 0     # other live simulators of this one's name seen since start
 
 
 @dataclass(frozen=True)
@@ -57,6 +58,10 @@ def loop_status(s: LoopSnapshot) -> LoopStatus:
     wedged = s.tick_age > WEDGED_S
     if s.error:
         level, message = ERROR, s.error
+    elif s.other_simulators:
+        level, message = ERROR, (f'{s.other_simulators} other simulator(s) of this name run: two feeders in one '
+                                 'namespace mix their states and commands; give each its own namespace '
+                                 '(-r __ns:=/feeder2)')
     elif wedged:
         level, message = ERROR, (f'one tick has been working for {s.tick_age:.1f} s: the physics cannot advance '
                                  'in bounded time with these parameters (see integration.*)')
@@ -71,6 +76,7 @@ def loop_status(s: LoopSnapshot) -> LoopStatus:
               'tick_period_p50_ms': _pct(s.periods_ms, 50), 'tick_period_p99_ms': _pct(s.periods_ms, 99),
               'tick_compute_p99_ms': _pct(s.busy_ms, 99), 'overruns': str(s.overruns),
               'tick_in_progress_s': f'{s.tick_age:.3f}',
+              'other_simulators': str(s.other_simulators),
               'lockstep': str(s.lockstep), 'steps_granted': str(s.steps_granted),
               'states_published': str(s.states_published),
               **s.intake, 'model_parameters_pending_reset': str(s.pending_reset)}

@@ -33,10 +33,9 @@ from foxglove.messages import (
     Vector3,
 )
 
+from ..interface.names import CONTACT_FRAME, FEEDER_FRAME
 from ..physics.surface import surface_profile
 
-FEEDER_FRAME = 'feeder'
-CONTACT_FRAME = 'contact'
 SURFACE_POINTS = 200            # points of the surface line
 PART_SIZE = 100e-6              # m: diameter of the part's sphere (the ~100 µm part)
 STACK_HEIGHT = 0.4e-3           # m: drawn height of a piezo stack below the surface

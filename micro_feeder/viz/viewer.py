@@ -38,9 +38,10 @@ import numpy as np
 from foxglove.channels import FrameTransformsChannel, SceneUpdateChannel
 from foxglove.websocket import Capability
 
+from ..interface import stamps, wire
+from ..interface.stamps import header_stamp_ns
 from ..logs.schemas import schema_text
 from ..logs.sim_parameters import parameter_value
-from ..logs.writer import header_stamp_ns
 from .endpoint import Endpoint
 from .scene import PART_SIZE, FeederScene
 
@@ -78,12 +79,12 @@ def matches(topic: str, name: str) -> bool:
     return topic == name if name.startswith('/') else topic == '/' + name or topic.endswith('/' + name)
 
 
-def stamp_ns(msg: Any) -> int:
+def message_stamp_ns(msg: Any) -> int:
     """Sim time (ns) of a ``/clock`` or header-stamped message, live object or CDR bytes."""
     if isinstance(msg, bytes):
         return header_stamp_ns(msg)        # a Clock's first field sits where a Header's stamp does
     stamp = msg.clock if hasattr(msg, 'clock') else msg.header.stamp
-    return stamp.sec * 1_000_000_000 + stamp.nanosec
+    return stamps.stamp_ns(stamp)
 
 
 @dataclass
@@ -212,7 +213,7 @@ class Viewer:
     def _forward(self, forwarded: ForwardedTopic, msg: Any) -> None:
         now = time.monotonic()
         if forwarded.time_source:
-            self.sim_ns = stamp_ns(msg)
+            self.sim_ns = message_stamp_ns(msg)
         if now - forwarded.last_sent >= forwarded.period:
             forwarded.last_sent = now
             if forwarded.channel.has_sinks():
@@ -223,8 +224,7 @@ class Viewer:
             self._on_pose(now)
 
     def _send(self, forwarded: ForwardedTopic, msg: Any) -> None:
-        from rclpy.serialization import serialize_message
-        data = msg if isinstance(msg, bytes) else serialize_message(msg)
+        data = msg if isinstance(msg, bytes) else wire.serialize(msg)
         forwarded.channel.log(data, log_time=self.sim_ns)
         forwarded.sent += 1
 
@@ -263,8 +263,7 @@ class Viewer:
         if self._friction_limit is None:
             return
         if isinstance(wrench, bytes):
-            from rclpy.serialization import deserialize_message
-            wrench = deserialize_message(wrench, self._by_role['wrench'].msg_type)
+            wrench = wire.deserialize(wrench, self._by_role['wrench'].msg_type)
         force = wrench.wrench.force
         q = float(self._friction_limit[1](np.array([force.z]))[0])
         q_max = None if math.isnan(q) else q
@@ -290,8 +289,7 @@ class Viewer:
             return None
         msg = forwarded.latest
         if isinstance(msg, bytes):
-            from rclpy.serialization import deserialize_message
-            msg = deserialize_message(msg, forwarded.msg_type)
+            msg = wire.deserialize(msg, forwarded.msg_type)
         return msg
 
     def _send_scene(self) -> None:
@@ -306,7 +304,7 @@ class Viewer:
         mode = self._latest('mode')
         p, q = pose.pose.position, pose.pose.orientation
         theta = -2.0 * math.atan2(q.y, q.w)      # the pose's orientation is a rotation by -θ about y
-        t_ns = stamp_ns(pose)
+        t_ns = message_stamp_ns(pose)
         self.scene_channel.log(scene.update(t_ns, strokes, p.x, p.z, theta, mode.data if mode else ''),
                                log_time=t_ns)
         self.transforms_channel.log(scene.transforms(t_ns, p.x, p.z, theta), log_time=t_ns)

@@ -3,9 +3,9 @@
 See :mod:`.model` for the API; :mod:`.kernel` is the compiled engine.
 """
 
-from .event_list import EVENT_KINDS, MODES, Event, EventList
+from .event_list import EVENT_KINDS, MODES, TRANSITION_KINDS, Event, EventList
 from .model import FeederModel, FeederState, Observation, RunResult, SimulationError
 from .params import DetachParams, IntegrationParams, LandingParams
 
-__all__ = ['EVENT_KINDS', 'MODES', 'DetachParams', 'Event', 'EventList', 'FeederModel', 'FeederState',
-           'IntegrationParams', 'LandingParams', 'Observation', 'RunResult', 'SimulationError']
+__all__ = ['EVENT_KINDS', 'MODES', 'TRANSITION_KINDS', 'DetachParams', 'Event', 'EventList', 'FeederModel',
+           'FeederState', 'IntegrationParams', 'LandingParams', 'Observation', 'RunResult', 'SimulationError']

@@ -15,7 +15,8 @@ from typing import NamedTuple, overload
 import numpy as np
 
 MODES = ('stuck', 'sliding', 'flying')
-EVENT_KINDS = ('stick_to_slip', 'slip_to_stick', 'take_off', 'landing', 'reversal')
+TRANSITION_KINDS = ('stick_to_slip', 'slip_to_stick', 'take_off', 'landing')   # mode changes, counted
+EVENT_KINDS = (*TRANSITION_KINDS, 'reversal')   # and a slide's change of direction
 
 
 class Event(NamedTuple):

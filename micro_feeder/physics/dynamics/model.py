@@ -34,10 +34,8 @@ from ..surface import SurfaceParams
 from ..waveforms import StrokeParams, StrokeSchedule, StrokeTable, stack_tables, waveform_table
 from . import kernel as k
 from . import layout
-from .event_list import MODES, EventList
+from .event_list import MODES, TRANSITION_KINDS, EventList
 from .params import DetachParams, IntegrationParams, LandingParams
-
-COUNTER_NAMES = ('stick_to_slip', 'slip_to_stick', 'take_off', 'landing')
 
 
 class SimulationError(RuntimeError):
@@ -157,7 +155,7 @@ class FeederState:
     @property
     def transitions(self) -> dict[str, int]:
         """Counters ``stick_to_slip``, ``slip_to_stick``, ``take_off``, ``landing`` (docs/dynamics.md §1)."""
-        return {name: int(self.iv[idx]) for name, idx in zip(COUNTER_NAMES, layout.COUNTERS, strict=True)}
+        return {name: int(self.iv[idx]) for name, idx in zip(TRANSITION_KINDS, layout.COUNTERS, strict=True)}
 
 
 @dataclass(frozen=True)

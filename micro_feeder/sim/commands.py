@@ -7,21 +7,30 @@ simulator logs it, counts it on ``/diagnostics`` and carries on with the command
 from __future__ import annotations
 
 import array
+import logging
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
-import rclpy.logging
-from rclpy.serialization import deserialize_message
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from ..interface import trajectory_cdr, wire
+from ..interface.stamps import seconds
 from ..physics.trajectory import CommandLimits
-from . import trajectory_cdr
-from .messages import seconds
 
 MAX_POINTS = 100_000     # points of one trajectory message: longer strokes go in windows
-_LOG = rclpy.logging.get_logger('micro_feeder.commands')
+_LOG = logging.getLogger('micro_feeder.commands')
+
+
+_warned: set[str] = set()
+
+
+def _warn_once(message: str) -> None:
+    """Log ``message`` as a warning the first time only (per process)."""
+    if message not in _warned:
+        _warned.add(message)
+        _LOG.warning(message)
 
 
 class CommandRejected(ValueError):
@@ -45,11 +54,6 @@ class TrajectoryCommand:
     @property
     def is_stop(self) -> bool:
         return self.offsets.size == 0
-
-
-def joint_names(n_actuators: int) -> list[str]:
-    """The actuator joint names ``piezo_0`` ... in actuator order."""
-    return [f'piezo_{k}' for k in range(n_actuators)]
 
 
 def _check_range(values: np.ndarray, low: float, high: float, what: str, unit: str) -> None:
@@ -97,7 +101,7 @@ def parse_trajectory(msg: JointTrajectory, joints: Sequence[str], limits: tuple[
     positions-only trajectory is accepted with a one-time warning (its linear interpolation has zero
     acceleration between knots, so the surface pushes the part only at the knots).
     What the interpolation does between knots is checked when the trajectory is applied
-    (:meth:`~micro_feeder.nodes.stepper.Stepper.command_trajectory`).
+    (:meth:`~micro_feeder.sim.stepper.Stepper.command_trajectory`).
     """
     points = msg.points
 
@@ -113,13 +117,14 @@ def parse_trajectory(msg: JointTrajectory, joints: Sequence[str], limits: tuple[
 def parse_trajectory_cdr(data: bytes, joints: Sequence[str], limits: tuple[float, float]) -> TrajectoryCommand:
     """:func:`parse_trajectory` of a serialized JointTrajectory, reading the knots of the usual layout
     (positions, velocities and accelerations on every point, as the actuator sends) with numpy instead of
-    deserializing one Python object per point; any other layout is deserialized by rclpy. A message of
-    more than :data:`MAX_POINTS` points is refused without reading them. Raises :class:`CommandRejected`
+    deserializing one Python object per point; any other layout is deserialized by rclpy
+    (:mod:`~micro_feeder.interface.wire`). A message of more than :data:`MAX_POINTS` points is refused
+    without reading them. Raises :class:`CommandRejected`
     (also for bytes that are not a JointTrajectory)."""
     decoded = trajectory_cdr.decode(data, MAX_POINTS)
     if decoded is None or (decoded.records is None and 0 < decoded.n_points <= MAX_POINTS):
         try:
-            msg = deserialize_message(data, JointTrajectory)
+            msg = wire.deserialize(data, JointTrajectory)
         except Exception as err:  # rclpy raises several types for malformed bytes
             raise CommandRejected(f'trajectory: cannot deserialize: {err}') from err
         return parse_trajectory(msg, joints, limits)
@@ -167,10 +172,9 @@ def _checked(stamp: float, names: list[str], n_points: int, knots: Callable[[lis
     if velocities is not None:
         _check_range(velocities, -bounds.velocity, bounds.velocity, 'trajectory: velocity', 'm/s')
     else:
-        _LOG.warning('positions-only trajectory: joint_trajectory_controller interpolates it linearly, so the '
-                     'stroke acceleration is zero between knots and the surface only pushes the part at the '
-                     'knots (it will barely move); send velocities and accelerations for smooth strokes',
-                     once=True)
+        _warn_once('positions-only trajectory: joint_trajectory_controller interpolates it linearly, so the '
+                   'stroke acceleration is zero between knots and the surface only pushes the part at the '
+                   'knots (it will barely move); send velocities and accelerations for smooth strokes')
     if accelerations is not None:
         _check_range(accelerations, -bounds.acceleration, bounds.acceleration, 'trajectory: acceleration',
                      'm/s^2')

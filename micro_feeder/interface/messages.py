@@ -12,7 +12,7 @@ import struct
 from collections.abc import Callable, Sequence
 
 import numpy as np
-from builtin_interfaces.msg import Duration, Time
+from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Point, PoseStamped, TwistStamped, WrenchStamped
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -22,41 +22,10 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from ..physics.dynamics import Observation
 from ..physics.surface import surface_profile
+from . import wire
 from .cdr import ENCAPSULATION, STAMP, put_string
-
-FEEDER_FRAME = 'feeder'
-CONTACT_FRAME = 'contact'
-
-
-def stamp_parts(t: float) -> tuple[int, int]:
-    """``t`` (s, >= 0) as (sec, nanosec) of a ROS Time or Duration, rounded to the nanosecond."""
-    return divmod(round(t * 1e9), 1_000_000_000)
-
-
-def to_time(t: float) -> Time:
-    """Sim time ``t`` (s, >= 0) as a ROS Time, rounded to the nanosecond."""
-    sec, nanosec = stamp_parts(t)
-    return Time(sec=sec, nanosec=nanosec)
-
-
-def to_duration(t: float) -> Duration:
-    """A duration ``t`` (s, >= 0) as a ROS Duration, rounded to the nanosecond."""
-    sec, nanosec = stamp_parts(t)
-    return Duration(sec=sec, nanosec=nanosec)
-
-
-def seconds(t: Time | Duration) -> float:
-    """A ROS Time or Duration in seconds (the inverse of :func:`to_time` / :func:`to_duration`)."""
-    return t.sec + t.nanosec * 1e-9
-
-
-def header_stamp(data: bytes) -> float:
-    """``header.stamp`` (s) of a serialized message that starts with a Header (CDR, either byte order), read
-    without deserializing the rest; 0 when the bytes are too short."""
-    if len(data) < 12:
-        return 0.0
-    sec, nanosec = struct.unpack_from('<iI' if data[1] == 1 else '>iI', data, 4)
-    return sec + nanosec * 1e-9
+from .names import CONTACT_FRAME, FEEDER_FRAME
+from .stamps import stamp_parts, to_duration
 
 
 def header_bytes(t: float, frame_id: str) -> bytes:
@@ -77,9 +46,7 @@ def _string_bytes(text: str) -> bytes:
 def contact_state_bytes(mode: str) -> bytes:
     """The serialized ``particle/contact_state`` String of ``mode`` (one per mode, serialized once: it is
     published at every mode change, up to a few times a tick)."""
-    from rclpy.serialization import serialize_message
-
-    return serialize_message(String(data=mode))
+    return wire.serialize(String(data=mode))
 
 
 def tilt_quaternion(theta: float) -> tuple[float, float, float, float]:
@@ -109,14 +76,12 @@ class SerializedTemplate:
     """
 
     def __init__(self, msg: object, stamp: Time, runs: Sequence[tuple[Callable[[list[float]], None], int]]):
-        from rclpy.serialization import serialize_message
-
         stamp.sec, stamp.nanosec = STAMP_SENTINEL
         first = 0
         for setter, length in runs:
             setter([_sentinel(first + i) for i in range(length)])
             first += length
-        template = serialize_message(msg)
+        template = wire.serialize(msg)
         self._buffer = bytearray(template)
         self._stamps_at = _offsets(template, STAMP.pack(*STAMP_SENTINEL))
         self._runs: list[tuple[int, struct.Struct]] = []

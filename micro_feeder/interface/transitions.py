@@ -16,9 +16,8 @@ from diagnostic_msgs.msg import DiagnosticStatus
 
 from ..physics.dynamics import Event
 from .cdr import ENCAPSULATION, STAMP, put_string, put_uint32
-from .messages import FEEDER_FRAME, stamp_parts
-
-TRANSITION_KINDS = ('stick_to_slip', 'slip_to_stick', 'take_off', 'landing')
+from .names import FEEDER_FRAME
+from .stamps import stamp_parts
 
 
 class TransitionEncoder:

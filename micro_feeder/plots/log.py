@@ -23,13 +23,13 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt
 import numpy as np
 
-from ..plots.dynamics import plot_friction, plot_modes, plot_strokes, time_scale
-from ..plots.units import scale
-from .friction_limit import static_limit
-from .reader import LogReader
-from .series import MODES, PartSeries, part_series
-from .sim_parameters import recorded_parameters
-from .strokes import CommandedStrokes, commanded_strokes
+from ..logs.friction_limit import static_limit
+from ..logs.reader import LogReader
+from ..logs.series import MODES, PartSeries, part_series
+from ..logs.sim_parameters import recorded_parameters
+from ..logs.strokes import CommandedStrokes, commanded_strokes
+from .dynamics import plot_friction, plot_modes, plot_strokes, time_scale
+from .units import scale
 
 STROKE_POINTS = 4000     # points of the commanded strokes over the window
 MARGIN = 0.25            # of the active span, each side of the default window

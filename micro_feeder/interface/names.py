@@ -1,0 +1,17 @@
+"""The names a client sees on the interface: contact modes, transition kinds (the counters' names too),
+coordinate frames (REP 103, docs/dynamics.md §1) and actuator joints. The physics owns the mode and event
+names; this module is where the rest of the package takes them from."""
+
+from __future__ import annotations
+
+from ..physics.dynamics import MODES, TRANSITION_KINDS
+
+FEEDER_FRAME = 'feeder'     # x along the feeder, z up, y to the left
+CONTACT_FRAME = 'contact'   # at the part: x along the surface tangent, z along its normal
+
+__all__ = ['CONTACT_FRAME', 'FEEDER_FRAME', 'MODES', 'TRANSITION_KINDS', 'joint_names']
+
+
+def joint_names(n_actuators: int) -> list[str]:
+    """The actuator joint names ``piezo_0`` ... in actuator order."""
+    return [f'piezo_{k}' for k in range(n_actuators)]
