@@ -105,6 +105,11 @@ class RosSession:
             self.log = str(self.recorder.close())
         return self.log
 
+    def recording_fate(self) -> str:
+        """'' when the recording ran to its end, else where and why it stopped (``recording stopped at
+        9.4 s: No space left on device (log readable up to 8.9 s)``)."""
+        return self.recorder.fate() if self.recorder is not None else ''
+
 
 @contextlib.contextmanager
 def ros_session(record: str | None = None, namespace: str = '/', viewer: Any = None) -> Iterator[RosSession]:

@@ -2,7 +2,9 @@
 
 ROS traffic stays on this host unless ``ROS_AUTOMATIC_DISCOVERY_RANGE`` is already set. The nodes share
 one EventsExecutor on the main thread; a live status line goes to stderr (when it is a terminal) and a
-summary to stdout at the end. Ctrl-C (or SIGTERM) ends the run cleanly, the log included.
+summary to stdout at the end. Ctrl-C (or SIGTERM) ends the run cleanly, the log included. A recording that
+fails (disk full, log directory removed, storage not responding) stops with one error line and the run
+goes on; its summary says where the log ends and why, and the exit status is then 1.
 """
 
 from __future__ import annotations
@@ -47,8 +49,8 @@ def status_line(sim: Any) -> str:
             f'RTF {sim.achieved_rtf:.2f}')
 
 
-def summary(sim: Any, actuator: Any, wall_s: float, log: str | None) -> str:
-    """What the run did, for stdout."""
+def summary(sim: Any, actuator: Any, wall_s: float, log: str | None, fate: str = '') -> str:
+    """What the run did, for stdout; ``fate``: how the recording ended when it stopped early."""
     state = sim.stepper.state
     lines = [f'sim time        {state.t:.6f} s in {wall_s:.2f} s wall (real-time factor {state.t / wall_s:.3f})',
              f'part            {state.mode} at x = {state.x * 1e3:.6f} mm, moved {state.distance * 1e6:+.3f} um, '
@@ -59,7 +61,7 @@ def summary(sim: Any, actuator: Any, wall_s: float, log: str | None) -> str:
     if sim.error:
         lines.append(f'error           {sim.error}')
     if log:
-        lines.append(f'log             {log}')
+        lines.append(f'log             {log}' + (f': {fate}' if fate else ''))
     return '\n'.join(lines)
 
 
@@ -116,5 +118,7 @@ def run(args: argparse.Namespace) -> int:
         sim.pause()     # the loop thread no longer advances the state the summary reads
         if tty is not None:
             print('\r' + status_line(sim), file=tty)
-        print(summary(sim, actuator, wall, session.close_log()))
-        return 1 if sim.error else 0
+        log = session.close_log()
+        fate = session.recording_fate()
+        print(summary(sim, actuator, wall, log, fate))
+        return 1 if sim.error or fate else 0

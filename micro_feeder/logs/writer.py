@@ -236,6 +236,36 @@ class LogWriter:
                                          'file was finished where it is now)', restore=False)
         return self.fault
 
+    def stop(self, reason: str, detail: str) -> WriteFault:
+        """Stop recording now for a reason found outside the writer (storage not responding ...): the log is
+        kept up to its last whole chunk and finished there, as after a write failure. Idempotent."""
+        if self.fault is None:
+            if self._sink is None:
+                self.fault = WriteFault(reason, detail, time.time_ns(), at_stamp_ns=self._pending_stamp)
+            else:
+                self._stop(reason, detail, restore=False)
+        return self.fault
+
+    def note_progress(self, fault: WriteFault) -> WriteFault:
+        """Fill in what is readable so far (messages in whole chunks, where they end) without changing
+        anything: for a fault found outside the writer while its thread is blocked in a write."""
+        sink = self._sink
+        files = list(self._files)
+        earlier = files[:-1] if sink is not None else files
+        fault.kept = sum(f.message_count for f in earlier) + (sink.safe_messages if sink is not None else 0)
+        span = sink.safe_span if sink is not None else None
+        ends = [f.start_ns + f.duration_ns for f in earlier if f.message_count]
+        fault.readable_until_ns = span[1] if span is not None else max(ends, default=None)
+        chunks = sink.safe_chunks if sink is not None else 0
+        fault.readable_until_stamp_ns = next((stamp for n, stamp in reversed(list(self._stamps)) if n <= chunks),
+                                             self._file_start_stamp)
+        return fault
+
+    @property
+    def last_stamp_ns(self) -> int | None:
+        """The header stamp [ns] of the last ``stamp_topic`` message written (None: none yet)."""
+        return self._pending_stamp
+
     def close(self) -> None:
         """Write the summary (with ``custom_data`` as the ``micro_feeder.recorder`` metadata record) and
         ``metadata.yaml``. Idempotent; after a fault the log was finished then, and nothing is written."""
@@ -261,6 +291,11 @@ class LogWriter:
     @property
     def message_count(self) -> int:
         return sum(f.message_count for f in self._files)
+
+    @property
+    def start_ns(self) -> int | None:
+        """Log time [ns] of the first message written (None: none yet)."""
+        return min((f.start_ns for f in list(self._files) if f.message_count), default=None)
 
     # -- files ------------------------------------------------------------------------------------
     def _write(self, topic: str, data: bytes, log_time_ns: int, publish_time_ns: int | None) -> None:
@@ -384,8 +419,8 @@ class LogWriter:
         """A write failed: stop (with ``stop_on_error``) or raise."""
         if not self.stop_on_error:
             raise err
-        code = f' (errno {errno.errorcode.get(err.errno, err.errno)})' if err.errno else ''
-        self._stop(_reason(err), f'{action}: {_reason(err)}{code}', restore=False)
+        code = f', errno {errno.errorcode.get(err.errno, err.errno)}' if err.errno else f': {err}'
+        self._stop(_reason(err), f'{action}{code}', restore=False)
 
     def _stop(self, reason: str, detail: str, restore: bool) -> None:
         """Stop recording: keep the current file up to its last whole chunk, finished there, and write
