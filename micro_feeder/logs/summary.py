@@ -11,6 +11,7 @@ import datetime
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .coverage import Coverage, coverage_lines, end_line
 from .reader import LogReader
 from .sim_parameters import recorded_parameters, run_mode
 
@@ -146,8 +147,9 @@ def _loss_lines(s: LogSummary) -> list[str]:
     return lines
 
 
-def format_summary(s: LogSummary) -> str:
-    """The summary as aligned text for a terminal."""
+def format_summary(s: LogSummary, coverage: Coverage | None = None) -> str:
+    """The summary as aligned text for a terminal; with ``coverage`` (:func:`.coverage.coverage`), also
+    where and why the log ends, the sim time each topic starts at, and what the log lacks of the run."""
     start = datetime.datetime.fromtimestamp(s.start_ns * 1e-9).isoformat(sep=' ', timespec='milliseconds')
     lines = [
         f'log        {s.path}',
@@ -156,17 +158,24 @@ def format_summary(s: LogSummary) -> str:
         f'duration   {s.duration:.3f} s',
         f'messages   {s.message_count:,}',
     ]
+    if coverage is not None and end_line(coverage):
+        lines.append(end_line(coverage))
     for path in s.truncated:
         lines.append(f'WARNING    {path.name} is truncated (recorder did not stop cleanly); read up to its '
                      'last whole chunk. "micro-feeder recover" rewrites it as a complete log.')
     lines.append('')
+    starts = coverage.starts if coverage is not None else {}
     wname = max([len('topic'), *(len(t.name) for t in s.topics)])
     wtype = max([len('type'), *(len(t.type) for t in s.topics)])
-    lines.append(f'{"topic":<{wname}}  {"type":<{wtype}}  {"count":>9}  {"rate":>10}')
+    lines.append(f'{"topic":<{wname}}  {"type":<{wtype}}  {"count":>9}  {"rate":>10}'
+                 + (f'  {"from (sim)":>12}' if starts else ''))
     lines += [f'{t.name:<{wname}}  {t.type:<{wtype}}  {t.count:>9,}  '
-              + (f'{t.rate:>7.1f} Hz' if t.rate is not None else f'{"–":>10}') for t in s.topics]
+              + (f'{t.rate:>7.1f} Hz' if t.rate is not None else f'{"–":>10}')
+              + (f'  {starts.get(t.name, "–")!s:>12}' if starts else '') for t in s.topics]
     lines.append('')
-    lines += _simulator_lines(s)
+    lines += _simulator_lines(s, coverage)
+    if coverage is not None:
+        lines += coverage_lines(coverage)
     p = s.part
     if p.x is None and p.mode is None:
         lines.append('part       no particle/pose or particle/contact_state in this log')
@@ -177,11 +186,14 @@ def format_summary(s: LogSummary) -> str:
         if p.x is not None and p.first_x is not None:
             lines.append(f'           moved {(p.x - p.first_x) * 1e6:+.3f} µm since t = {p.first_stamp:.4f} s')
     lines += _loss_lines(s)
+    if coverage is not None and coverage.end.kind != 'complete' and s.recorder:
+        lines.append('           counted only up to where the log ends (ends, above): nothing after that is counted')
     return '\n'.join(lines)
 
 
-def _simulator_lines(s: LogSummary) -> list[str]:
-    """Sim time span (pose stamps) with the achieved real-time factor, and how the simulator was driven."""
+def _simulator_lines(s: LogSummary, coverage: Coverage | None = None) -> list[str]:
+    """Sim time span (pose stamps) with the achieved real-time factor, and how the simulator was driven
+    (with ``coverage``, the commands it counted when the log holds fewer of its receipts)."""
     lines = []
     p = s.part
     if p.stamp is not None and p.first_stamp is not None:
@@ -196,5 +208,10 @@ def _simulator_lines(s: LogSummary) -> list[str]:
                'real time': f'real time × {run.real_time_factor:g}',
                'as fast as possible': f'as fast as possible, {run.step_period:g} s per step'}.get(run.mode, run.mode)
         n = run.commands_received
-        lines.append(f'simulator  {how}; {n} command{"s" * (n != 1)} received')
+        counted = coverage.simulator_commands if coverage is not None else None
+        if counted is not None and counted > n:     # it counts from its start, the receipts only as recorded
+            lines.append(f'simulator  {how}; {counted} command{"s" * (counted != 1)} received '
+                         f'(its /diagnostics), {n} of them acknowledged in the log')
+        else:
+            lines.append(f'simulator  {how}; {n} command{"s" * (n != 1)} received')
     return lines

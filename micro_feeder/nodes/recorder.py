@@ -48,6 +48,7 @@ from std_srvs.srv import Trigger
 
 from ..interface.topics import TOPICS, TOPICS_BY_NAME
 from ..logs.background import WRITE_TIMEOUT, BackgroundWriter
+from ..logs.coverage import coverage
 from ..logs.metadata import dump_qos
 from ..logs.reader import LogReader
 from ..logs.summary import format_summary, summarize
@@ -330,7 +331,9 @@ def main(args: list[str] | None = None) -> int:
         node.destroy_node()
         rclpy.shutdown()
     try:
-        print(format_summary(summarize(LogReader(path))))
+        log = LogReader(path)
+        summary = summarize(log)
+        print(format_summary(summary, coverage(log, summary.recorder, summary.part.stamp)))
     except (OSError, ValueError) as err:
         print(f'recorder: nothing readable in {path}: {err}', file=sys.stderr)
     return 1 if node.fault is not None else 0
