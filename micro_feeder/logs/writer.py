@@ -438,8 +438,7 @@ class LogWriter:
             self._files = [f for f in self._files if f not in lost]
         if sink is not None and restore:
             try:
-                if not self.bare:
-                    self.path.mkdir(parents=True, exist_ok=True)
+                (self.path.parent if self.bare else self.path).mkdir(parents=True, exist_ok=True)
                 sink.restore()
             except OSError as err:
                 problems.append(f'the log could not be restored ({_reason(err)}): it is lost')
