@@ -250,8 +250,8 @@ def coverage_lines(c: Coverage) -> list[str]:
             if s.longest_end_log is not None and s.count > 1 else \
             (f', ending at log time +{s.longest_end_log:.1f} s' if s.longest_end_log is not None else '')
         lines.append(f'coverage   the recorder did not run {s.count} time{"s" * (s.count != 1)}, {s.total_s:.1f} s in '
-                     f'all{when} (its process stopped or starved of CPU): messages published meanwhile are likely '
-                     'missing and not counted as lost')
+                     f'all{when} (its process stopped, or its executor busy or starved of CPU): messages published '
+                     'meanwhile may be missing, not counted as lost')
     return lines
 
 

@@ -17,9 +17,10 @@ within ``write_timeout`` s or a disk that cannot keep up stop the recording: the
 whole chunk, finished there with where and why it ends (``logs.writer``), and the fault is reported once,
 as one ERROR line on the node's logger and on ``/diagnostics`` (level ERROR from then on). The node stays
 up (in ``micro-feeder run`` the simulation goes on); the ``recorder`` program ends with status 1 after
-printing the summary of what is readable. A recorder that was itself stopped (SIGSTOP, a suspended
-laptop, starved of CPU) for more than ``STALL_REPORT`` s says so when it runs again: what was published
-meanwhile is likely missing, and is counted in the ``stalls`` keys of its counters.
+printing the summary of what is readable. A recorder that did not run for more than ``STALL_REPORT`` s
+(its process stopped by SIGSTOP or a suspended machine, its executor busy elsewhere, starved of CPU) says so
+when it runs again: what was published meanwhile may be missing, and it is counted in the ``stalls`` keys of
+its counters.
 
 Use as a program (``recorder --ros-args -p output:=out/run1``: stops cleanly on SIGINT, SIGTERM or the
 ``~/stop`` service, ``/recorder/stop`` by default) or in-process: ``r = Recorder(context=ctx)``, add it to
@@ -120,7 +121,7 @@ class Recorder(Node):
         self.done = Future()
         self._closed = False
         self._reported: set[str] = set()   # what was reported once: 'fault', 'error', skipped topics
-        self._last_watch = time.monotonic()
+        self._last_watch: float | None = None   # monotonic time of the last look (None before the first spin)
         self._pending: dict[str, str] = {}  # absolute name -> configured name, type not known yet
         for name in p['topics']:
             absolute = self.resolve_topic_name(name)
@@ -251,13 +252,13 @@ class Recorder(Node):
         """Look at the writer thread: report a fault, a bug or a skipped topic once; notice a stall of
         this whole process (a gap between two looks)."""
         now = time.monotonic()
-        gap, self._last_watch = now - self._last_watch, now
+        gap, self._last_watch = now - (self._last_watch or now), now
         if gap > STALL_REPORT:
             self._background.excuse()   # the writer thread was stopped with the process, not stuck
             self.stalls.append((time.time_ns(), gap))
             self.get_logger().warning(
-                f'the recorder did not run for {gap:.1f} s (process stopped or starved of CPU): messages published '
-                'meanwhile are likely missing from the log and not counted as lost')
+                f'the recorder did not run for {gap:.1f} s (its process stopped, or its executor busy or starved of '
+                'CPU): messages published meanwhile may be missing from the log, not counted as lost')
         if self._closed:
             return
         self._background.poll()
