@@ -28,6 +28,7 @@ import os
 import random
 import shutil
 import signal
+import struct
 import subprocess
 import sys
 import tempfile
@@ -58,8 +59,11 @@ def run_simulator(out: Path, ros_args: list[str]) -> int:
             self._publisher, self._sent = publisher, sent
 
         def publish(self, msg: Any) -> None:
-            stamp = msg.header.stamp
-            self._sent[stamp.sec * 1_000_000_000 + stamp.nanosec] = time.perf_counter()
+            if isinstance(msg, bytes | bytearray | memoryview):     # the simulator publishes CDR bytes
+                sec, nanosec = struct.unpack_from('<iI' if msg[1] == 1 else '>iI', msg, 4)
+            else:
+                sec, nanosec = msg.header.stamp.sec, msg.header.stamp.nanosec
+            self._sent[sec * 1_000_000_000 + nanosec] = time.perf_counter()
             self._publisher.publish(msg)
 
         def __getattr__(self, name: str) -> Any:
