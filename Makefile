@@ -58,6 +58,7 @@ figures: $(STAMP)
 	$(BIN)/micro-feeder sweep --vary stroke.frequency=100:5000:200 --set stroke.count=5 --out $(FIG_OUT) --plot $(IMG)/sweep_frequency.png
 	$(BIN)/micro-feeder run --duration 0.1 --set stroke.count=5 --real-time-factor 0.05 --record $(FIG_OUT)/run
 	$(BIN)/micro-feeder plot $(FIG_OUT)/run -o $(IMG)/run.png
+	$(BIN)/python $(IMG)/nodes_topics.py $(IMG)/nodes_topics.png
 
 bench: $(STAMP) foxglove-client
 	for b in bench/bench_*.py; do $(BIN)/python $$b || exit 1; done
