@@ -9,7 +9,7 @@ OUT ?= out
 # All ROS traffic stays on this host unless the caller says otherwise.
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 
-.PHONY: test demo lint bench install constraints clean foxglove-client figures
+.PHONY: test demo lint bench install constraints clean foxglove-client figures performance-doc
 
 install: $(STAMP)
 
@@ -62,6 +62,10 @@ figures: $(STAMP)
 
 bench: $(STAMP) foxglove-client
 	for b in bench/bench_*.py; do $(BIN)/python $$b || exit 1; done
+
+# docs/performance.md and README's table of figures, from what the benchmarks wrote to bench/results/*.json.
+performance-doc: $(STAMP)
+	$(BIN)/python bench/report.py
 
 # Re-pin after changing requirements: freeze a fresh venv, drop the ROS wheels' bare names.
 constraints:
