@@ -342,3 +342,29 @@ def test_cli_wait_timeout_names_the_topics_and_exits_1(tmp_path):
     assert ('replay: error: no subscriber after 1 s on any of /particle/contact_state, /particle/contact_wrench, '
             '/particle/pose, /particle/twist: nothing was replayed') in err.splitlines(), err
     assert 'Traceback' not in err and 'no message published' in out
+
+
+def test_ctrl_c_stops_a_replay_with_status_130(ros_context, tmp_path):
+    """Issue 26: SIGINT in the middle of a replay ends ``micro-feeder replay`` with status 130 (docs/robustness.md)
+    and one ``interrupted`` line, no traceback; it used to exit 0 as if the replay had finished."""
+    import signal
+
+    write_motion_log(tmp_path / 'log', n=N)
+    listener, executor, got = _pose_listener(ros_context)
+    proc = _replay_process(tmp_path / 'log', '--topic', 'particle/pose', '--wait-for-subscribers',
+                           '--rate', '0.01')     # 0.3 s of log in 30 s
+    try:
+        wait_until(lambda: len(got) >= 10 or proc.poll() is not None, 60, executor=executor,
+                   what='the replay under way')
+        assert proc.poll() is None, proc.communicate()
+        proc.send_signal(signal.SIGINT)
+        wait_until(lambda: proc.poll() is not None, 10, executor=executor, what='the replay ended by SIGINT')
+    finally:
+        proc.kill()
+        _, err = proc.communicate()
+        executor.shutdown()
+        listener.destroy_node()
+    assert proc.returncode == 130, err
+    assert 'Traceback' not in err
+    assert 'micro-feeder replay: interrupted' in err
+    assert len(got) < N

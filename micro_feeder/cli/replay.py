@@ -6,6 +6,7 @@ import argparse
 import math
 import os
 import re
+import signal
 
 from . import CommandError
 from ._foxglove import add_foxglove_option, announce, live_view
@@ -92,9 +93,17 @@ def run(args: argparse.Namespace) -> int:
     argv = ['replay', '--ros-args', *ros_args]
     with live_view(args.foxglove) as viewer:
         if viewer is None:
-            return replay_main(argv)
+            return _status(replay_main(argv))
 
         def tap(node: object) -> None:
             viewer.tap(node)
             announce(viewer)
-        return replay_main(argv, tap=tap)
+        return _status(replay_main(argv, tap=tap))
+
+
+def _status(status: int) -> int:
+    """The replay node's exit status, Ctrl-C (its 130) reported as every command reports it (``micro-feeder
+    replay: interrupted``, status 130: cli.main)."""
+    if status == 128 + signal.SIGINT:
+        raise KeyboardInterrupt
+    return status

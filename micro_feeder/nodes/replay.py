@@ -317,9 +317,9 @@ class Replay(Node):
 
 def main(args: list[str] | None = None, tap: Callable[[Node], None] | None = None) -> int:
     """Console script ``replay``: ``replay --ros-args -p log:=out/run1 -p rate:=2.0``. ``tap`` is given the
-    node before it plays (``micro-feeder replay --foxglove``). Exit status: 0 at the end of the replay (or when
-    stopped), 1 when the wait for subscribers timed out or the player died, 2 for a refused parameter or
-    nothing to publish."""
+    node before it plays (``micro-feeder replay --foxglove``). Exit status: 0 at the end of the replay, 128 +
+    the signal number when SIGINT (130) or SIGTERM (143) stopped it, 1 when the wait for subscribers timed
+    out or the player died, 2 for a refused parameter or nothing to publish."""
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = StopFlag().install()
     try:
@@ -349,6 +349,8 @@ def main(args: list[str] | None = None, tap: Callable[[Node], None] | None = Non
         executor.shutdown()
         node.destroy_node()
         rclpy.shutdown()
+    if stop.signal is not None:
+        return 128 + stop.signal
     if node.error:
         print(f'replay: error: {node.error}', file=sys.stderr)
         return 2
