@@ -175,7 +175,9 @@ class Actuator(Node):
     def _on_sim_time(self, data: bytes) -> None:
         self.sim_time = stamps.header_stamp(data)
         if self._pending_stream:
+            origin_ns = round((self.sim_time + self.get_parameter('stream.lead').value) * 1e9)  # _start_stream's
             self._start_stream(self.sim_time)
+            self.get_logger().info(f'burst streamed from t = {origin_ns * 1e-9:.9f} s (sim time)')
         elif self._stream is not None:
             self._feed(self.sim_time)
 
