@@ -27,6 +27,7 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -57,6 +58,8 @@ NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
     'stream.lead': (ParamSpec('a streamed burst is kept scheduled this far ahead of sim time', 's', gt=0, le=10.0),
                     0.2),
 }
+ACK_TIMEOUT_S = 1.0    # s an actuator that stops waits for its subscribers to acknowledge what it sent
+GRAPH_SETTLE_S = 0.5   # s the trajectory topic's subscriptions must stay the same before an auto start
 COUNT_SPEC = ParamSpec('number of strokes in the burst; 0 = strokes until ~/stop (streamed)', kind='int', ge=0)
 
 
@@ -86,6 +89,8 @@ class Actuator(Node):
         self._pending_stream = False                 # streamed start waiting for the first sim time
         self._instance = f'{self.get_fully_qualified_name()}@{time.time_ns():x}'   # names this run's commands
         self._windows_in_burst = 0
+        self._graph_seen: frozenset[bytes] | None = None   # the trajectory subscriptions seen ready, and since when
+        self._graph_since = 0.0
         self._traj_topic = self._pub.topic_name
         self._joint_states_topic = self.resolve_topic_name('actuator/joint_states')
         self._auto = self.create_timer(0.05, self._auto_start) if self.get_parameter('auto_start').value else None
@@ -146,14 +151,21 @@ class Actuator(Node):
 
     def simulator_ready(self) -> bool:
         """True when a simulator (a node that subscribes to ``actuator/trajectory`` and publishes
-        ``actuator/joint_states``) is on the graph and every discovered subscription of the trajectory topic
-        is matched with this node's publisher: a burst sent now reaches the simulator. Any other subscriber
-        (a recorder, a viewer) alone is not enough."""
+        ``actuator/joint_states``) is on the graph, every discovered subscription of the trajectory topic is
+        matched with this node's publisher, and the set of subscriptions has not changed for
+        :data:`GRAPH_SETTLE_S`: a burst sent now reaches the simulator, and a recorder discovered a moment
+        after it (which would miss the burst) has had time to appear. Another subscriber alone (a recorder, a
+        viewer) is not enough."""
         subscriptions = self.get_subscriptions_info_by_topic(self._traj_topic)
         publishers = self.get_publishers_info_by_topic(self._joint_states_topic)
         simulators = {(i.node_namespace, i.node_name) for i in publishers}
-        return (any((i.node_namespace, i.node_name) in simulators for i in subscriptions)
-                and self._pub.get_subscription_count() >= len(subscriptions))
+        ready = (any((i.node_namespace, i.node_name) in simulators for i in subscriptions)
+                 and self._pub.get_subscription_count() >= len(subscriptions))
+        seen = frozenset(bytes(i.endpoint_gid) for i in subscriptions) if ready else None
+        now = time.monotonic()
+        if seen != self._graph_seen:
+            self._graph_seen, self._graph_since = seen, now
+        return ready and now - self._graph_since >= GRAPH_SETTLE_S
 
     def trajectory_subscribers(self) -> int:
         """Subscriptions matched on ``actuator/trajectory``."""
@@ -217,6 +229,12 @@ class Actuator(Node):
         self.destroy_timer(self._auto)
         self._auto = None
         self.get_logger().info(self.start())
+
+    def destroy_node(self) -> None:
+        """Wait (up to :data:`ACK_TIMEOUT_S`) until every subscriber acknowledged what was sent, then destroy:
+        a reliable message not yet delivered to a slower subscriber (a recorder) dies with its publisher."""
+        self._pub.wait_for_all_acked(Duration(nanoseconds=round(ACK_TIMEOUT_S * 1e9)))
+        super().destroy_node()
 
     def state(self) -> str:
         """What the node is doing, in words: for /diagnostics and people."""
