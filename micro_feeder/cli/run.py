@@ -21,6 +21,7 @@ from ._session import add_namespace_option, namespace, ros_session, validate
 
 STATUS_PERIOD = 0.2   # s (wall clock) between two status line updates
 READY_TIMEOUT = 10.0  # s (wall clock) the run waits at t = 0 for its actuator and recorder
+READY_POLL = 0.002    # s (wall clock) between two checks of what the run waits for at t = 0
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -68,24 +69,53 @@ def summary(sim: Any, actuator: Any, wall_s: float, log: str | None, fate: str =
 def _wait_until_ready(session: Any, sim: Any, actuator: Any, whole_burst: bool) -> None:
     """Spin (sim time held at 0) until the simulator hears the actuator, the recorder (if any) hears every
     simulator topic and the actuator's command, and a whole burst has reached the simulator; at most
-    :data:`READY_TIMEOUT` s of wall time, then start anyway and say what is missing."""
+    :data:`READY_TIMEOUT` s of wall time, then start anyway and say what is missing. The actuator (built
+    without ``auto_start``) sends its burst here, once every subscriber is matched: its own auto-start sends
+    it when the simulator alone is, and it polled only every 50 ms."""
+    from rclpy.clock import Clock, ClockType
+    from rclpy.task import Future
+
     recording = session.recorder is not None
 
-    def missing() -> list[str]:
+    def listening() -> list[str]:
         out = []
         if actuator.trajectory_subscribers() < 1 + recording:
             out.append('the simulator' + (' and the recorder' if recording else '') + ' on actuator/trajectory')
         if recording and not sim.outputs_matched():
             out.append('the recorder on the simulator\'s topics')
+        return out
+
+    def missing() -> list[str]:
+        out = listening()
         if whole_burst and sim.commands.received < 1:
             out.append('the actuator\'s burst at the simulator')
         return out
 
     deadline = time.monotonic() + READY_TIMEOUT
-    session.spin(lambda: not missing() or time.monotonic() > deadline)
+    ready = Future()
+    started = []
+
+    def start() -> None:
+        if not started:
+            started.append(True)
+            actuator.get_logger().info(actuator.start())
+
+    # checked by a timer that ends the spin at once (the spin's own checks come every 0.1 s: that held the run
+    # at t = 0, and its log after the first pose, up to 100 ms longer than needed)
+    def check() -> None:
+        if not listening():
+            start()
+        if not ready.done() and (not missing() or time.monotonic() > deadline):
+            ready.set_result(True)
+
+    timer = sim.create_timer(READY_POLL, check, clock=Clock(clock_type=ClockType.STEADY_TIME))
+    session.spin(ready.done, ready)
+    sim.destroy_timer(timer)
     if missing() and not session.stop:
         print(f'micro-feeder run: started after {READY_TIMEOUT:g} s without {"; ".join(missing())}',
               file=sys.stderr)
+    if not session.stop:
+        start()
 
 
 def run(args: argparse.Namespace) -> int:
@@ -106,7 +136,8 @@ def run(args: argparse.Namespace) -> int:
                                             overrides={**model_flat, 'real_time_factor': args.real_time_factor},
                                             hold=True))
         end = sim.stop_at(args.duration) if args.duration is not None else None   # before the actuator is built
-        actuator = session.add(lambda: Actuator(context=session.context, namespace=ns, overrides=flat))
+        actuator = session.add(lambda: Actuator(context=session.context, namespace=ns,
+                                                overrides={**flat, 'auto_start': False}))   # started when ready
         _wait_until_ready(session, sim, actuator, whole_burst=actuator.sends_whole_burst())
         sim.resume()
         tty: TextIO | None = sys.stderr if sys.stderr.isatty() else None

@@ -2,7 +2,11 @@
 state, recorder loss counters.
 
 The loss counters come from the recorder: its ``micro_feeder.recorder`` metadata record on a clean stop,
-or, in a truncated log, the last of its ``/diagnostics`` messages that made it to disk (same keys).
+or, in a truncated log, the last of its ``/diagnostics`` messages that made it to disk (same keys). They
+count only what was lost after the recorder subscribed; what happened before (a recorder that joined late)
+is found from the log itself: a first pose later than one tick of sim time, and fewer commands than the
+simulator says it received (its ``simulator/command_receipts``, one per command, and the
+``commands_received`` of its ``/diagnostics``).
 """
 
 from __future__ import annotations
@@ -17,6 +21,9 @@ from .sim_parameters import recorded_parameters, run_mode
 
 RECORDER_STATUS_PREFIX = 'recorder'
 RATE_MIN_COUNT = 10  # topics with fewer messages are events (commands, mode changes): no rate shown
+COMMAND_TOPICS = ('actuator/trajectory', 'actuator/command')
+DEFAULT_TICK = 2e-3  # s of sim time a tick can advance, without recorded parameters (1 kHz, real time)
+SIMULATOR_STATUS_SUFFIX = 'simulator: loop'
 
 
 @dataclass
@@ -54,6 +61,22 @@ class SimulatorRun:
 
 
 @dataclass
+class MissingStart:
+    """What the log lacks from before the recorder subscribed: ``first_pose`` [s], the sim time of the first
+    pose when it is later than one ``tick`` [s] of sim time (None otherwise); ``commands`` of the
+    ``commands_received`` the simulator received are in no way accounted for in the log (neither recorded
+    nor counted lost by the recorder): the first ones, sent before the recorder subscribed."""
+
+    tick: float = DEFAULT_TICK
+    first_pose: float | None = None
+    commands: int = 0
+    commands_received: int = 0
+
+    def __bool__(self) -> bool:
+        return self.first_pose is not None or self.commands > 0
+
+
+@dataclass
 class LogSummary:
     """Everything ``micro-feeder info`` shows."""
 
@@ -68,6 +91,7 @@ class LogSummary:
     simulator: SimulatorRun
     recorder: dict[str, str] = field(default_factory=dict)
     recorder_source: str = ''  # 'summary', 'diagnostics' or ''
+    start: MissingStart = field(default_factory=MissingStart)
 
     @property
     def message_count(self) -> int:
@@ -106,6 +130,48 @@ def simulator_run(log: LogReader) -> SimulatorRun:
     return run
 
 
+def tick_length(params: dict | None) -> float:
+    """The most sim time [s] one simulator tick advances: two loop periods × the real-time factor in real time
+    (what a tick after a late wake-up catches up), else one ``step_period``; :data:`DEFAULT_TICK` unknown."""
+    if params is None:
+        return DEFAULT_TICK
+    if run_mode(params) == 'real time':
+        return 2.0 * float(params.get('real_time_factor', 1.0)) / float(params.get('publish_rate', 1000.0))
+    return float(params.get('step_period', DEFAULT_TICK))
+
+
+def _commands_received(log: LogReader) -> int:
+    """Commands the simulator says it received: its receipts in the log, or the ``commands_received`` of
+    its last ``/diagnostics`` when that is more (a counter since its start); 0 with neither."""
+    receipts = log.resolve('simulator/command_receipts')
+    received = log.topics[receipts].count if receipts else 0
+    counts: dict[str, int] = {}
+    for m in log.messages(['/diagnostics'], decoded=True):
+        for status in m.message.status:
+            if status.name.endswith(SIMULATOR_STATUS_SUFFIX):
+                value = next((kv.value for kv in status.values if kv.key == 'commands_received'), None)
+                if value is not None and value.isdigit():
+                    counts[status.name] = int(value)
+    if len(counts) == 1:        # several simulators on one log: their counters cannot be told apart here
+        received = max(received, *counts.values())
+    return received
+
+
+def missing_start(log: LogReader, part: PartState, recorder: dict[str, str]) -> MissingStart:
+    """What the log lacks from before the recorder subscribed (:class:`MissingStart`)."""
+    snapshots = recorded_parameters(log)
+    start = MissingStart(tick=tick_length(snapshots[0] if snapshots else None))
+    if part.first_stamp is not None and part.first_stamp > start.tick + 1e-9:
+        start.first_pose = part.first_stamp
+    start.commands_received = _commands_received(log)
+    held = lost = 0
+    for topic in filter(None, map(log.resolve, COMMAND_TOPICS)):
+        held += log.topics[topic].count
+        lost += int(recorder.get(f'lost.{topic}', 0))
+    start.commands = max(start.commands_received - held - lost, 0)
+    return start
+
+
 def summarize(log: LogReader) -> LogSummary:
     """Summarise an opened log (reads the last pose/contact state and, when needed, the diagnostics)."""
     rows = [TopicRow(t.name, t.type, t.count, _rate(log, t.name, t.count))
@@ -122,7 +188,8 @@ def summarize(log: LogReader) -> LogSummary:
         part.mode = state.message.data
     counters, source = recorder_counters(log)
     return LogSummary(log.path, log.files, sum(f.stat().st_size for f in log.files), log.truncated,
-                      log.start_ns, log.duration, rows, part, simulator_run(log), counters, source)
+                      log.start_ns, log.duration, rows, part, simulator_run(log), counters, source,
+                      missing_start(log, part, counters))
 
 
 def _size(n: int) -> str:
@@ -135,15 +202,27 @@ def _size(n: int) -> str:
 
 def _loss_lines(s: LogSummary) -> list[str]:
     if not s.recorder:
-        return ['loss       unknown (no recorder counters in this log)']
+        return ['loss       unknown (no recorder counters in this log)', *_start_lines(s.start)]
     c = s.recorder
     lost, incompatible = int(c.get('lost_total', 0)), int(c.get('incompatible_qos_total', 0))
     where = 'final summary' if s.recorder_source == 'summary' else 'last recorder diagnostics'
-    verdict = 'none' if lost == 0 and incompatible == 0 else f'{lost} messages lost'
+    verdict = f'{lost} messages lost' if lost or incompatible else 'none while recording' if s.start else 'none'
     lines = [f'loss       {verdict}  (received {int(c.get("received_total", 0)):,}; QoS message-lost events '
              f'{lost}, incompatible-QoS events {incompatible}; from the {where})']
     per_topic = {k.split('.', 1)[1]: v for k, v in c.items() if k.startswith('lost.') and v != '0'}
     lines += [f'           {topic}: {n} lost' for topic, n in sorted(per_topic.items())]
+    return lines + _start_lines(s.start)
+
+
+def _start_lines(start: MissingStart) -> list[str]:
+    """What the recorder's counters cannot see: what happened before it subscribed."""
+    lines = []
+    if start.first_pose is not None:
+        lines.append(f'           start missing: first pose at sim time {start.first_pose:.6f} s, not 0 (one tick '
+                     f'is at most {start.tick * 1e3:g} ms): the recorder joined late')
+    if start.commands:
+        lines.append(f'           start missing: the first {start.commands} of the {start.commands_received} '
+                     'commands the simulator received are not in the log (sent before the recorder subscribed)')
     return lines
 
 
