@@ -130,11 +130,12 @@ def test_info_says_which_commands_the_log_lacks_against_the_receipts(tmp_path):
     writer.custom_data.update({'received_total': '1015', 'lost_total': '0', 'incompatible_qos_total': '0'})
     writer.close()
     text = info_text(path)
-    line = next(line for line in text.splitlines() if line.startswith('coverage'))
-    assert line == ('coverage   actuator/trajectory: 6 of the 10 commands the simulator acknowledged '
-                    '(simulator/command_receipts) are not in the log (4 recorded): 6 acknowledged at sim time '
+    line = next(line for line in text.splitlines() if 'start missing' in line)
+    assert line == ('           start missing: actuator/trajectory: 6 of the 10 commands the simulator acknowledged '
+                    '(simulator/command_receipts) are not in the log (4 recorded): acknowledged at sim time '
                     '0.000–0.500 s, before the first recorded one (sent before the recorder was matched with '
                     'their publisher)'), text
+    assert 'loss       none while recording' in text
     row = next(line for line in text.splitlines() if line.startswith('/actuator/trajectory'))
     assert row.endswith('0.600 s'), row       # where its record starts, in sim time
     assert 'simulator  real time × 1; 10 commands received' in text
@@ -179,3 +180,31 @@ def test_info_of_a_log_whose_writer_was_killed_says_it_ends_abruptly(tmp_path):
         text = info_text(crashed)
     assert 'ends       abruptly, after sim time 0.299 s (log time +0.30 s): the recorder did not finish the log' \
         in text, text
+
+
+def test_receipts_that_name_their_command_find_the_missing_ones_exactly(tmp_path):
+    """The actuator names every trajectory (header.frame_id) and the receipt repeats it after '#': the
+    missing ones are found wherever they are, here the first 6 windows of a stream and one later."""
+    path = tmp_path / 'log'
+    writer = LogWriter(path)
+    for topic, type_ in (('/particle/pose', 'geometry_msgs/msg/PoseStamped'),
+                         ('/actuator/trajectory', 'trajectory_msgs/msg/JointTrajectory'),
+                         ('/simulator/command_receipts', 'std_msgs/msg/Header')):
+        writer.add_topic(topic, type_)
+    trajectory = one_of_each()['/actuator/trajectory']
+    for i in range(1000):
+        writer.write('/particle/pose', serialize_message(pose(i)), T0 + i * MS + 1)
+        if i % 100 == 0:
+            window = f'/actuator:b1:w{i // 100}'
+            receipt = Header(frame_id=f'actuator/trajectory#{window}')
+            receipt.stamp.sec, receipt.stamp.nanosec = divmod(i * MS, 1_000_000_000)
+            writer.write('/simulator/command_receipts', serialize_message(receipt), T0 + i * MS + 3)
+            if i >= 600 and i != 800:
+                trajectory.header.frame_id = window
+                writer.write('/actuator/trajectory', serialize_message(trajectory), T0 + i * MS)
+    writer.custom_data.update({'received_total': '1013', 'lost_total': '0', 'incompatible_qos_total': '0'})
+    writer.close()
+    line = next(line for line in info_text(path).splitlines() if 'missing:' in line)
+    assert line == ('           missing: actuator/trajectory: 7 of the 10 commands the simulator acknowledged '
+                    '(simulator/command_receipts) are not in the log (3 recorded): 6 acknowledged at sim time '
+                    '0.000–0.500 s, before the first recorded one, 1 later'), line

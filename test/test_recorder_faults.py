@@ -252,4 +252,4 @@ def test_a_stopped_recorder_process_does_not_stop_the_run_and_says_so_when_it_re
     stalls = [line for line in rec_err.splitlines() if 'did not run for' in line]
     assert len(stalls) == 1, rec_err
     text = info(log)
-    assert 'coverage   the recorder did not run 1 time' in text, text
+    assert 'recorder   did not run 1 time' in text, text

@@ -16,9 +16,12 @@ simulator received that the log lacks, and the times the recorder itself stood s
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..interface.names import split_receipt_frame
+from ..interface.stamps import header_frame_id
 from . import writer as w
 from .metadata import read_custom_data
 from .reader import LogReader
@@ -26,7 +29,6 @@ from .reader import LogReader
 POSE = 'particle/pose'
 RECEIPTS = 'simulator/command_receipts'
 COMMAND_TOPICS = ('actuator/trajectory', 'actuator/command')
-SIMULATOR_STATUS = 'simulator: loop'
 RECEIPT_MARGIN_NS = 50_000_000   # a receipt reaches the recorder about when its command does (50 ms margin)
 
 
@@ -96,7 +98,6 @@ class Coverage:
     end: LogEnd = field(default_factory=LogEnd)
     commands: list[MissingCommands] = field(default_factory=list)
     stalls: Stalls | None = None
-    simulator_commands: int | None = None   # commands_received of the simulator's last /diagnostics
 
 
 def _s(ns: str | int | None, origin: int = 0) -> float | None:
@@ -156,41 +157,46 @@ def log_end(log: LogReader, record: dict[str, str], last_pose: float | None) -> 
 
 
 def commands_against_receipts(log: LogReader, record: dict[str, str]) -> list[MissingCommands]:
-    """Command topics with fewer recorded messages than the simulator's receipts for them."""
+    """Command topics with commands the simulator acknowledged that the log lacks. A receipt naming the
+    command's identity (``actuator/trajectory#<identity>``) is matched with the recorded command of that
+    identity, exactly; unnamed ones by count, the missing taken as the first (a publisher's first messages,
+    sent before the recorder was matched with it). Commands the recorder counted lost are not missing."""
     receipts_topic = log.resolve(RECEIPTS)
     if receipts_topic is None:
         return []
-    receipts: dict[str, list[tuple[int, int]]] = {}
+    receipts: dict[str, list[tuple[int, int, str]]] = {}
     for m in log.messages([receipts_topic], decoded=True):
-        receipts.setdefault(m.message.frame_id, []).append((m.log_time_ns, m.stamp_ns or 0))
+        topic, command_id = split_receipt_frame(m.message.frame_id)
+        receipts.setdefault(topic, []).append((m.log_time_ns, m.stamp_ns or 0, command_id))
     out = []
     for topic in COMMAND_TOPICS:
         acknowledged = receipts.get(topic, [])
         name = log.resolve(topic)
-        recorded = log.topics[name].count if name else 0
+        if not acknowledged:
+            continue
+        recorded = Counter(header_frame_id(m.data) if m.stamped else ''
+                           for m in (log.messages([name]) if name else ()))
         lost = int(record.get(f'lost.{name}', 0) or 0) if name else 0
-        missing = len(acknowledged) - recorded - lost
+        named = [r for r in acknowledged if r[2]]
+        unnamed = [r for r in acknowledged if not r[2]]
+        absent = []
+        for receipt in named:
+            if recorded[receipt[2]] > 0:
+                recorded[receipt[2]] -= 1
+            else:
+                absent.append(receipt)
+        absent += unnamed[:max(len(unnamed) - recorded[''], 0)]
+        missing = len(absent) - lost
         if missing <= 0:
             continue
+        absent.sort()
         first = log.first(name) if name else None
         limit = first.log_time_ns - RECEIPT_MARGIN_NS if first is not None else None
-        before = [stamp for t, stamp in acknowledged[:missing] if limit is None or t < limit]
-        out.append(MissingCommands(topic, len(acknowledged), recorded, lost, missing, len(before),
-                                   _s(before[0]) if before else None, _s(before[-1]) if before else None))
+        before = [stamp for t, stamp, _ in absent if limit is None or t < limit]
+        out.append(MissingCommands(topic, len(acknowledged), log.topics[name].count if name else 0,
+                                   lost, missing, len(before), _s(before[0]) if before else None,
+                                   _s(before[-1]) if before else None))
     return out
-
-
-def simulator_commands(log: LogReader) -> int | None:
-    """``commands_received`` of the simulator's last ``/diagnostics`` (a count since its start, so it
-    includes commands from before the recorder started); None without, or with several simulators."""
-    counts: dict[str, int] = {}
-    for m in log.messages(['/diagnostics'], decoded=True):
-        for status in m.message.status:
-            if status.name.endswith(SIMULATOR_STATUS):
-                value = next((kv.value for kv in status.values if kv.key == 'commands_received'), '')
-                if value.isdigit():
-                    counts[status.name] = int(value)
-    return next(iter(counts.values())) if len(counts) == 1 else None
 
 
 def stalls(log: LogReader, record: dict[str, str]) -> Stalls | None:
@@ -208,7 +214,7 @@ def coverage(log: LogReader, counters: dict[str, str], last_pose: float | None) 
     record = recorder_record(log)
     known = {**counters, **record}
     return Coverage(topic_starts(log), log_end(log, record, last_pose), commands_against_receipts(log, known),
-                    stalls(log, known), simulator_commands(log))
+                    stalls(log, known))
 
 
 def end_line(c: Coverage) -> str:
@@ -229,30 +235,37 @@ def end_line(c: Coverage) -> str:
             f'{until}{cut}{lost}; nothing later was recorded')
 
 
-def coverage_lines(c: Coverage) -> list[str]:
-    """Commands the log lacks against the receipts, and the recorder's stalls."""
+def missing_command_lines(c: Coverage) -> list[str]:
+    """Per command topic, the commands the log lacks against the receipts: a ``start missing`` when they
+    were all acknowledged before the first recorded one."""
     lines = []
     for m in c.commands:
-        where = ''
-        if m.before:
-            span = (f'at sim time {m.first_sim:.3f} s' if m.first_sim == m.last_sim else
-                    f'at sim time {m.first_sim:.3f}–{m.last_sim:.3f} s')
-            where = (f': {m.before} acknowledged {span}, before the first recorded one (sent before the '
-                     'recorder was matched with their publisher)')
-            if m.before < m.missing:
-                where += f', {m.missing - m.before} later'
         lost = f' and {m.lost} counted lost' if m.lost else ''
-        lines.append(f'coverage   {m.topic}: {m.missing} of the {m.receipts} commands the simulator acknowledged '
-                     f'(simulator/command_receipts) are not in the log ({m.recorded} recorded{lost}){where}')
-    if c.stalls is not None:
-        s = c.stalls
-        when = f', the longest {s.longest_s:.1f} s ending at log time +{s.longest_end_log:.1f} s' \
-            if s.longest_end_log is not None and s.count > 1 else \
-            (f', ending at log time +{s.longest_end_log:.1f} s' if s.longest_end_log is not None else '')
-        lines.append(f'coverage   the recorder did not run {s.count} time{"s" * (s.count != 1)}, {s.total_s:.1f} s in '
-                     f'all{when} (its process stopped, or its executor busy or starved of CPU): messages published '
-                     'meanwhile may be missing, not counted as lost')
+        head = (f'{m.topic}: {m.missing} of the {m.receipts} commands the simulator acknowledged '
+                f'(simulator/command_receipts) are not in the log ({m.recorded} recorded{lost})')
+        span = ('' if not m.before else f'at sim time {m.first_sim:.3f} s' if m.first_sim == m.last_sim else
+                f'at sim time {m.first_sim:.3f}–{m.last_sim:.3f} s')
+        if m.before and m.before == m.missing:
+            lines.append(f'start missing: {head}: acknowledged {span}, before the first recorded one (sent before '
+                         'the recorder was matched with their publisher)')
+        elif m.before:
+            lines.append(f'missing: {head}: {m.before} acknowledged {span}, before the first recorded one, '
+                         f'{m.missing - m.before} later')
+        else:
+            lines.append(f'missing: {head}')
     return lines
+
+
+def stall_lines(c: Coverage) -> list[str]:
+    """The times the recorder did not run."""
+    if c.stalls is None:
+        return []
+    s = c.stalls
+    when = (f', the longest {s.longest_s:.1f} s ending at log time +{s.longest_end_log:.1f} s' if s.count > 1 else
+            f', ending at log time +{s.longest_end_log:.1f} s') if s.longest_end_log is not None else ''
+    return [f'recorder   did not run {s.count} time{"s" * (s.count != 1)}, {s.total_s:.1f} s in all{when} (its '
+            'process stopped, or its executor busy or starved of CPU): messages published meanwhile may be '
+            'missing, not counted as lost']
 
 
 def _where(sim: float | None, log_s: float | None) -> str:

@@ -15,7 +15,7 @@ import datetime
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from .coverage import Coverage, coverage_lines, end_line
+from .coverage import Coverage, end_line, missing_command_lines, stall_lines
 from .reader import LogReader
 from .sim_parameters import recorded_parameters, run_mode
 
@@ -200,27 +200,36 @@ def _size(n: int) -> str:
     return f'{n} B'
 
 
-def _loss_lines(s: LogSummary) -> list[str]:
+def _loss_lines(s: LogSummary, coverage: Coverage | None = None) -> list[str]:
+    """The recorder's loss counters, then what they cannot see (:func:`_start_lines`); with ``coverage``, a
+    log that ends early says its counts stop there."""
+    ends_early = coverage is not None and coverage.end.kind != 'complete'
     if not s.recorder:
-        return ['loss       unknown (no recorder counters in this log)', *_start_lines(s.start)]
+        return ['loss       unknown (no recorder counters in this log)', *_start_lines(s.start, coverage)]
     c = s.recorder
     lost, incompatible = int(c.get('lost_total', 0)), int(c.get('incompatible_qos_total', 0))
     where = 'final summary' if s.recorder_source == 'summary' else 'last recorder diagnostics'
-    verdict = f'{lost} messages lost' if lost or incompatible else 'none while recording' if s.start else 'none'
+    missing = s.start or (coverage is not None and coverage.commands) or ends_early
+    verdict = f'{lost} messages lost' if lost or incompatible else 'none while recording' if missing else 'none'
     lines = [f'loss       {verdict}  (received {int(c.get("received_total", 0)):,}; QoS message-lost events '
              f'{lost}, incompatible-QoS events {incompatible}; from the {where})']
     per_topic = {k.split('.', 1)[1]: v for k, v in c.items() if k.startswith('lost.') and v != '0'}
     lines += [f'           {topic}: {n} lost' for topic, n in sorted(per_topic.items())]
-    return lines + _start_lines(s.start)
+    if ends_early:
+        lines.append('           counted only up to where the log ends (ends, above): nothing after that is counted')
+    return lines + _start_lines(s.start, coverage)
 
 
-def _start_lines(start: MissingStart) -> list[str]:
-    """What the recorder's counters cannot see: what happened before it subscribed."""
+def _start_lines(start: MissingStart, coverage: Coverage | None = None) -> list[str]:
+    """What the recorder's counters cannot see: what happened before it subscribed, and (with ``coverage``)
+    the commands it lacks against the simulator's receipts, per command topic, instead of their total."""
     lines = []
     if start.first_pose is not None:
         lines.append(f'           start missing: first pose at sim time {start.first_pose:.6f} s, not 0 (one tick '
                      f'is at most {start.tick * 1e3:g} ms): the recorder joined late')
-    if start.commands:
+    if coverage is not None and coverage.commands:
+        lines += [f'           {line}' for line in missing_command_lines(coverage)]
+    elif start.commands:
         lines.append(f'           start missing: the first {start.commands} of the {start.commands_received} '
                      'commands the simulator received are not in the log (sent before the recorder subscribed)')
     return lines
@@ -252,9 +261,9 @@ def format_summary(s: LogSummary, coverage: Coverage | None = None) -> str:
               + (f'{t.rate:>7.1f} Hz' if t.rate is not None else f'{"–":>10}')
               + (f'  {starts.get(t.name, "–")!s:>12}' if starts else '') for t in s.topics]
     lines.append('')
-    lines += _simulator_lines(s, coverage)
+    lines += _simulator_lines(s)
     if coverage is not None:
-        lines += coverage_lines(coverage)
+        lines += stall_lines(coverage)
     p = s.part
     if p.x is None and p.mode is None:
         lines.append('part       no particle/pose or particle/contact_state in this log')
@@ -264,15 +273,13 @@ def format_summary(s: LogSummary, coverage: Coverage | None = None) -> str:
         lines.append(f'part       {where}; mode {p.mode or "unknown"}')
         if p.x is not None and p.first_x is not None:
             lines.append(f'           moved {(p.x - p.first_x) * 1e6:+.3f} µm since t = {p.first_stamp:.4f} s')
-    lines += _loss_lines(s)
-    if coverage is not None and coverage.end.kind != 'complete' and s.recorder:
-        lines.append('           counted only up to where the log ends (ends, above): nothing after that is counted')
+    lines += _loss_lines(s, coverage)
     return '\n'.join(lines)
 
 
-def _simulator_lines(s: LogSummary, coverage: Coverage | None = None) -> list[str]:
-    """Sim time span (pose stamps) with the achieved real-time factor, and how the simulator was driven
-    (with ``coverage``, the commands it counted when the log holds fewer of its receipts)."""
+def _simulator_lines(s: LogSummary) -> list[str]:
+    """Sim time span (pose stamps) with the achieved real-time factor, and how the simulator was driven (the
+    commands it counted itself when the log holds fewer of its receipts)."""
     lines = []
     p = s.part
     if p.stamp is not None and p.first_stamp is not None:
@@ -286,9 +293,8 @@ def _simulator_lines(s: LogSummary, coverage: Coverage | None = None) -> list[st
                'lockstep': f'lockstep, {run.step_period:g} s per simulator/step call or command',
                'real time': f'real time × {run.real_time_factor:g}',
                'as fast as possible': f'as fast as possible, {run.step_period:g} s per step'}.get(run.mode, run.mode)
-        n = run.commands_received
-        counted = coverage.simulator_commands if coverage is not None else None
-        if counted is not None and counted > n:     # it counts from its start, the receipts only as recorded
+        n, counted = run.commands_received, s.start.commands_received
+        if counted > n:     # its /diagnostics count from its start, the receipts only what was recorded
             lines.append(f'simulator  {how}; {counted} command{"s" * (counted != 1)} received '
                          f'(its /diagnostics), {n} of them acknowledged in the log')
         else:
