@@ -236,14 +236,12 @@ class LogWriter:
                                          'file was finished where it is now)', restore=False)
         return self.fault
 
-    def stop(self, reason: str, detail: str) -> WriteFault:
+    def stop(self, reason: str, detail: str) -> WriteFault | None:
         """Stop recording now for a reason found outside the writer (storage not responding ...): the log is
-        kept up to its last whole chunk and finished there, as after a write failure. Idempotent."""
-        if self.fault is None:
-            if self._sink is None:
-                self.fault = WriteFault(reason, detail, time.time_ns(), at_stamp_ns=self._pending_stamp)
-            else:
-                self._stop(reason, detail, restore=False)
+        kept up to its last whole chunk and finished there, as after a write failure. Idempotent; nothing
+        happens to a log already closed (returns :attr:`fault`, None after a clean close)."""
+        if self.fault is None and self._writer is not None:
+            self._stop(reason, detail, restore=False)
         return self.fault
 
     def note_progress(self, fault: WriteFault) -> WriteFault:
