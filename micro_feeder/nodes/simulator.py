@@ -591,8 +591,10 @@ class Simulator(Node):
         return SetParametersResult(successful=reason is None, reason=reason or '')
 
     def _apply_parameters(self, params: list[Parameter]) -> None:
-        """Post-set callback: the node's parameters apply at once, the model's on ~/reset."""
+        """Post-set callback: the node's parameters apply at once, the model's on ~/reset. Says so once per
+        reset, not once per set (a client setting 450 parameters one by one got 450 INFO lines)."""
         with self._lock:
+            was_pending = self._model_pending
             for param in params:
                 if param.name == 'real_time_factor':
                     self._rtf = param.value
@@ -602,8 +604,9 @@ class Simulator(Node):
                     self._model_pending = True
             if any(p.name in NODE_SPECS for p in params):
                 self._publish_parameters()
-        if any(p.name in self._model_specs for p in params):
-            self.get_logger().info('model parameters changed: applied on ~/reset')
+        if self._model_pending and not was_pending:
+            self.get_logger().info('model parameters changed: applied on ~/reset (further changes before it are '
+                                   'not logged; /diagnostics: model_parameters_pending_reset)')
 
     def _parameter_msgs(self, names: Iterable[str]) -> list[ParameterMsg]:
         return [self.get_parameter(name).to_parameter_msg() for name in names]
