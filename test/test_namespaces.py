@@ -90,7 +90,7 @@ def test_a_second_simulator_in_one_namespace_is_refused_with_the_reason(ros_cont
         exe = shutil.which('simulator', path=str(Path(sys.executable).parent))
         second = subprocess.Popen([exe, '--ros-args', '-r', '__ns:=/dup'], stdout=subprocess.PIPE,
                                   stderr=subprocess.STDOUT, text=True)
-        deadline = 60.0
+        deadline = 120.0      # a simulator process starts in ~3 s idle; a fresh clone under load 9 took > 60 s
         while second.poll() is None and deadline > 0:     # spin the first so that it is discoverable
             executor.spin_once(timeout_sec=0.1)
             deadline -= 0.1
