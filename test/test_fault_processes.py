@@ -168,6 +168,8 @@ def test_a_stream_follows_sim_time_through_a_reset_and_a_stalled_actuator(ros_co
                    what='strokes moving again')
         moving = _moving_again_after(watcher, resumed_at)
         assert moving - resumed_at <= 2 * LEAD + 0.05, f'strokes again {moving - resumed_at:.3f} s after the fault'
+        wait_until(lambda: 're-phase' in watcher.status.get('actuator: stroke', {}).get('_message', ''), 30,
+                   executor=executor, what='the actuator reporting the re-phase')
         _spin(executor, 1.0)
         sim_status, actuator_status = watcher.status['simulator: loop'], watcher.status['actuator: stroke']
         _assert_no_throw(watcher, before)
@@ -176,10 +178,16 @@ def test_a_stream_follows_sim_time_through_a_reset_and_a_stalled_actuator(ros_co
         watcher.destroy_node()
         stop_process(actuator)
         stop_process(sim)
-    assert sim_status['rejected_commands'] == '0', sim_status      # nothing late joined, nothing twice
-    assert int(actuator_status['stream_rephases']) >= 1 and 're-phase' in actuator_status['_message']
-    if fault == 'sigstop':                                         # no replay of the past: windows in the
-        assert int(actuator_status['windows_sent']) < 400          # usual ~50/s, not a burst of stale ones
+    assert int(actuator_status['stream_rephases']) >= 1
+    if fault == 'reset':                                           # nothing late joined, nothing twice
+        assert sim_status['rejected_commands'] == '0', sim_status['last_rejection']
+    else:
+        # windows in flight when the actuator stopped may reach the simulator after it resumed (a reliable
+        # writer repairs what it sent only when it runs again): too late, each is refused, never joined
+        assert int(sim_status['rejected_commands']) <= int(sim_status['commands_late']), sim_status
+        assert sim_status['rejected_commands'] == '0' or 'late by' in sim_status['last_rejection'], sim_status
+        assert int(actuator_status['windows_sent']) < 400          # no replay of the past: windows in the
+                                                                   # usual ~50/s, not a burst of stale ones
 
 
 def test_a_stream_survives_a_simulator_restart(ros_context: Context) -> None:
@@ -188,15 +196,17 @@ def test_a_stream_survives_a_simulator_restart(ros_context: Context) -> None:
         _spin(executor, 1.0)
         before = max(s for _, s in watcher.speeds)
         assert stop_process(sim)[0] == 0
-        _spin(executor, 1.0)
-        status = watcher.status.get('actuator: stroke', {})
+        wait_until(lambda: 'no simulator' in watcher.status.get('actuator: stroke', {}).get('_message', ''), 30,
+                   executor=executor, what='the actuator saying the simulator is gone')
         watcher.strokes.clear()
         sim = start_process('simulator')
         wait_until(lambda: _moving_again_after(watcher, 0.0) is not None, 60, executor=executor,
                    what='the new simulator moving')
         moving = _moving_again_after(watcher, 0.0)
         first = watcher.strokes[0][0]
-        assert moving - first <= 2 * LEAD + 0.05, f'strokes again {moving - first:.3f} s after the new start'
+        # the actuator re-phases once its publisher matched the new simulator's subscription: discovery,
+        # a few hundred ms after this client saw the new simulator's first state
+        assert moving - first <= LEAD + 1.0, f'strokes again {moving - first:.3f} s after the new start'
         _spin(executor, 1.0)
         sim_status = watcher.status['simulator: loop']
         _assert_no_throw(watcher, before)
@@ -205,5 +215,4 @@ def test_a_stream_survives_a_simulator_restart(ros_context: Context) -> None:
         watcher.destroy_node()
         stop_process(actuator)
         stop_process(sim)
-    assert sim_status['rejected_commands'] == '0', sim_status
-    assert status, 'the actuator reported nothing while the simulator was gone'
+    assert sim_status['rejected_commands'] == '0', sim_status['last_rejection']

@@ -31,6 +31,7 @@ from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger
@@ -60,6 +61,7 @@ NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
 }
 ACK_TIMEOUT_S = 1.0    # s an actuator that stops waits for its subscribers to acknowledge what it sent
 GRAPH_SETTLE_S = 0.5   # s the trajectory topic's subscriptions must stay the same before an auto start
+GRAPH_POLL_S = 0.05    # s between looks at which simulators the trajectory publisher reaches, while streaming
 COUNT_SPEC = ParamSpec('number of strokes in the burst; 0 = strokes until ~/stop (streamed)', kind='int', ge=0)
 
 
@@ -91,6 +93,10 @@ class Actuator(Node):
         self._windows_in_burst = 0
         self._graph_seen: frozenset[bytes] | None = None   # the trajectory subscriptions seen ready, and since when
         self._graph_since = 0.0
+        self._joint_states: bytes | None = None      # the latest actuator/joint_states, serialized
+        self._simulators: frozenset[bytes] = frozenset()   # trajectory subscriptions of the simulators reached
+        self._matched = -1                           # trajectory subscriptions matched at the last look
+        self._graph_looked = 0.0                     # monotonic time of that look (s)
         self._traj_topic = self._pub.topic_name
         self._joint_states_topic = self.resolve_topic_name('actuator/joint_states')
         self._auto = self.create_timer(0.05, self._auto_start) if self.get_parameter('auto_start').value else None
@@ -149,6 +155,17 @@ class Actuator(Node):
         burst and window, so that the simulator applies each once and the log and the receipts name it."""
         return f'{self._instance}:b{self.bursts}' + (f':w{window}' if window is not None else '')
 
+    def _simulator_subscriptions(self) -> frozenset[bytes] | None:
+        """Endpoint ids of the ``actuator/trajectory`` subscriptions of simulators (nodes that also publish
+        ``actuator/joint_states``), when every discovered subscription is matched with this node's publisher
+        (what is sent now reaches them); None while some are discovered but not yet matched."""
+        subscriptions = self.get_subscriptions_info_by_topic(self._traj_topic)
+        if self._pub.get_subscription_count() < len(subscriptions):
+            return None
+        publishers = self.get_publishers_info_by_topic(self._joint_states_topic)
+        simulators = {(i.node_namespace, i.node_name) for i in publishers}
+        return frozenset(bytes(i.endpoint_gid) for i in subscriptions if (i.node_namespace, i.node_name) in simulators)
+
     def simulator_ready(self) -> bool:
         """True when a simulator (a node that subscribes to ``actuator/trajectory`` and publishes
         ``actuator/joint_states``) is on the graph, every discovered subscription of the trajectory topic is
@@ -156,16 +173,35 @@ class Actuator(Node):
         :data:`GRAPH_SETTLE_S`: a burst sent now reaches the simulator, and a recorder discovered a moment
         after it (which would miss the burst) has had time to appear. Another subscriber alone (a recorder, a
         viewer) is not enough."""
-        subscriptions = self.get_subscriptions_info_by_topic(self._traj_topic)
-        publishers = self.get_publishers_info_by_topic(self._joint_states_topic)
-        simulators = {(i.node_namespace, i.node_name) for i in publishers}
-        ready = (any((i.node_namespace, i.node_name) in simulators for i in subscriptions)
-                 and self._pub.get_subscription_count() >= len(subscriptions))
-        seen = frozenset(bytes(i.endpoint_gid) for i in subscriptions) if ready else None
+        ready = bool(self._simulator_subscriptions())
+        seen = frozenset(bytes(i.endpoint_gid) for i in self.get_subscriptions_info_by_topic(self._traj_topic)) \
+            if ready else None
         now = time.monotonic()
         if seen != self._graph_seen:
             self._graph_seen, self._graph_since = seen, now
         return ready and now - self._graph_since >= GRAPH_SETTLE_S
+
+    def _look_for_simulators(self) -> tuple[bool, bool]:
+        """(a simulator is reached, a new one appeared since the last look): looked up when the trajectory
+        publisher's matches change, and every :data:`GRAPH_POLL_S` while streaming. A new simulator (restarted,
+        or a second one) holds none of the strokes sent before it matched: the stream re-phases to it."""
+        matched, now = self._pub.get_subscription_count(), time.monotonic()
+        if matched == self._matched and now - self._graph_looked < GRAPH_POLL_S:
+            return bool(self._simulators), False
+        self._matched, self._graph_looked = matched, now
+        simulators = self._simulator_subscriptions()
+        if simulators is None:                       # one is discovered but not matched yet: wait for it
+            return False, False
+        new = bool(simulators - self._simulators)
+        self._simulators = simulators
+        return bool(simulators), new
+
+    def _held_strokes(self) -> np.ndarray | None:
+        """The strokes (m) the simulator reported last on ``actuator/joint_states``, or None."""
+        if self._joint_states is None:
+            return None
+        positions = np.asarray(deserialize_message(self._joint_states, JointState).position, dtype=float)
+        return positions if self._stream is not None and positions.size == self._stream.n_actuators else None
 
     def trajectory_subscribers(self) -> int:
         """Subscriptions matched on ``actuator/trajectory``."""
@@ -190,6 +226,7 @@ class Actuator(Node):
 
     def _start_stream(self, now: float) -> None:
         self._pending_stream = False
+        self._simulators = self._simulator_subscriptions() or frozenset()
         self._stream = self._new_stream(now + self.get_parameter('stream.lead').value)
         self._feed(now)
 
@@ -198,7 +235,11 @@ class Actuator(Node):
         sim time went back or passed the strokes (:meth:`StrokeStream.follow`); at a finite stream's end, a
         stop stamped there, so the simulator knows the stream ended rather than fell silent."""
         stream = self._stream
-        windows, why = stream.follow(now, self.get_parameter('stream.lead').value)
+        reached, new_simulator = self._look_for_simulators()
+        if not reached:                              # sent now, it would be lost: wait, re-phase when one is back
+            return
+        windows, why = stream.follow(now, self.get_parameter('stream.lead').value, self._held_strokes,
+                                     new_simulator=new_simulator)
         if why is not None:
             self.rephases += 1
             self.underruns += 'passed the strokes' in why
@@ -214,6 +255,7 @@ class Actuator(Node):
 
     def _on_sim_time(self, data: bytes) -> None:
         self.sim_time = stamps.header_stamp(data)
+        self._joint_states = data
         if self._pending_stream:
             origin_ns = round((self.sim_time + self.get_parameter('stream.lead').value) * 1e9)  # _start_stream's
             self._start_stream(self.sim_time)
@@ -244,6 +286,8 @@ class Actuator(Node):
             return 'waiting for the simulator (auto_start)'
         if self._pending_stream:
             return 'streaming: waiting for sim time on actuator/joint_states'
+        if self._stream is not None and not self._simulator_subscriptions():
+            return 'streaming: no simulator reached on actuator/trajectory, waiting for one'
         if self._stream is not None:
             return f'streaming, {self.rephases} re-phase(s)' if self.rephases else 'streaming'
         return 'idle'

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -91,23 +92,27 @@ class StrokeStream:
             values = np.concatenate([rest, values], axis=1)
         return self.origin_ns + start, ns - start, values
 
-    def follow(self, now: float, lead: float) -> tuple[list[Window], str | None]:
+    def follow(self, now: float, lead: float, held: Callable[[], np.ndarray | None] | None = None, *,
+               new_simulator: bool = False) -> tuple[list[Window], str | None]:
         """The windows to send now that sim time is ``now`` (s), keeping ``lead`` (s) of strokes scheduled ahead,
-        and why the stream re-phased first (None when it did not). It re-phases (:meth:`rejoin`, ``lead`` ahead)
-        when sim time went back (a reset, a new simulator: from rest at 0, the burst continuing) or passed the
-        strokes scheduled (this sender stalled, or lost the simulator: from the last knot sent, in phase with
-        sim time, the missed strokes skipped). Nothing stale is ever sent."""
+        and why the stream re-phased first (None when it did not). It re-phases (:meth:`rejoin`, ``lead`` ahead,
+        from the strokes ``held()`` (m) the simulator reports now; when None, the last knot sent, or rest after
+        a time jump) when sim time went back or the sender saw ``new_simulator`` (a reset, a new simulator:
+        the burst continuing) or passed the strokes scheduled (this sender stalled, or lost the simulator: in
+        phase with sim time, the missed strokes skipped). Nothing stale is ever sent, and a re-phased stream
+        starts where the simulator's strokes are, so they never jump."""
         why = None
         at_ns = round((now + lead) * 1e9)
-        if self._last_now is not None and now < self._last_now - TIME_BACK:
-            why = (f'sim time went back from {self._last_now:.6f} s to {now:.6f} s (a reset, or a new simulator): '
-                   f'restarted from rest at t = {at_ns * 1e-9:.6f} s')
-            self.rejoin(at_ns, np.zeros(self.n_actuators), keep_phase=False)
+        if new_simulator or (self._last_now is not None and now < self._last_now - TIME_BACK):
+            cause = ('a new simulator' if new_simulator else
+                     f'sim time went back from {self._last_now:.6f} s to {now:.6f} s (a reset, or a new simulator)')
+            why = f'{cause}: restarted from rest at t = {at_ns * 1e-9:.6f} s'
+            self.rejoin(at_ns, _reported(held, np.zeros(self.n_actuators)), keep_phase=False)
         elif self.sent_ns > 0 and not self.done and self.scheduled_until < now:
             why = (f'sim time {now:.6f} s passed the strokes scheduled (until {self.scheduled_until:.6f} s: the '
                    f'sender stalled or lost the simulator, or stream.lead is short): rejoined at t = '
                    f'{at_ns * 1e-9:.6f} s')
-            self.rejoin(at_ns, self.last_positions, keep_phase=True)
+            self.rejoin(at_ns, _reported(held, self.last_positions), keep_phase=True)
         self._last_now = now
         windows = []
         while not self.done and self.scheduled_until < now + lead:
@@ -137,6 +142,11 @@ class StrokeStream:
         p = self.params
         needed = math.floor((stop_ns * 1e-9 - p.delay) / p.period_s) + 2 + math.ceil(max(p.phases))
         return dataclasses.replace(p, count=max(needed, 1))
+
+
+def _reported(held: Callable[[], np.ndarray | None] | None, otherwise: np.ndarray) -> np.ndarray:
+    strokes = None if held is None else held()
+    return otherwise if strokes is None else strokes
 
 
 def encode_window(window: Window, command_id: str = '') -> bytes:
