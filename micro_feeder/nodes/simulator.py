@@ -94,6 +94,9 @@ COMMAND_TYPES = {'actuator/trajectory': JointTrajectory, 'actuator/command': Flo
 CDR_PARSE_BYTES = 8192
 
 
+TWIN_WATCH_DEPTH = 10    # events of ~/parameters kept for the twin check (own ones included)
+
+
 class DuplicateSimulator(NodeRefused):
     """Another simulator already publishes this one's state topics (same name and namespace): refused."""
 
@@ -121,8 +124,10 @@ class Simulator(Node):
         self.started_at_ns = time.time_ns()     # tells this simulator from a twin of its name (older one wins)
         self.twins: set[int] = set()            # older live simulators of this name seen (their start times)
         self.refusal = ''                       # why this node must not run on this graph (spin_node exits 2)
+        # 10 deep: this node's own events arrive here too, and a history of 1 let one of them overwrite a
+        # twin's latched event before the executor took it (under load: the twin never seen, both ran)
         self._twin_watch = self.create_subscription(ParameterEvent, '~/parameters', self._on_twin_parameters,
-                                                    topic_qos('simulator/parameters'))
+                                                    topic_qos('simulator/parameters', TWIN_WATCH_DEPTH))
         # First, what destroy_node() needs: rclpy destroys a node whose construction failed below (a refused
         # parameter) at shutdown, and that must not end in an AttributeError hiding the reason.
         self._loop: TickLoop | None = None
