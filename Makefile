@@ -59,6 +59,7 @@ figures: $(STAMP)
 	$(BIN)/micro-feeder sweep --vary stroke.frequency=100:5000:200 --set stroke.count=5 --out $(FIG_OUT) --plot $(IMG)/sweep_frequency.png
 	$(BIN)/micro-feeder run --duration 0.1 --set stroke.count=5 --real-time-factor 0.05 --record $(FIG_OUT)/run
 	$(BIN)/micro-feeder plot $(FIG_OUT)/run -o $(IMG)/run.png
+	$(BIN)/python docs/img/track_landing_laws.py $(IMG)/track_landing_laws.png
 	$(BIN)/python $(IMG)/nodes_topics.py $(IMG)/nodes_topics.png
 
 bench: $(STAMP) foxglove-client

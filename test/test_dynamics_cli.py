@@ -12,7 +12,8 @@ def test_simulate_json_csv_and_plot(tmp_path, capsys):
     assert main(['simulate', '--json', '--out', str(tmp_path), '--plot']) == 0
     summary = json.loads(capsys.readouterr().out)
     assert set(summary) == {'distance_m', 'settled', 'final_mode', 'transitions', 'max_speed_mps', 'sim_time_s',
-                            'wall_time_s'}
+                            'wall_time_s', 'mean_velocity_mps', 'throw_number'}
+    assert summary['mean_velocity_mps'] is None and summary['throw_number'] is None   # one stroke, no track
     assert set(summary['transitions']) == {'stick_to_slip', 'slip_to_stick', 'take_off', 'landing'}
     assert summary['final_mode'] == 'stuck' and summary['sim_time_s'] == pytest.approx(3e-3)
     with (tmp_path / 'simulate.csv').open() as handle:

@@ -37,6 +37,7 @@ from micro_feeder.sim.stepper import Stepper, build_model
 from micro_feeder.sim.stream import StrokeStream, points_per_message, sample_waveform
 
 EXAMPLES = int(os.environ.get('MF_PATH_EXAMPLES', '200'))
+TRACK_EXAMPLES = int(os.environ.get('MF_TRACK_PATH_EXAMPLES', '100'))   # in make test (not marked paths)
 TICK = 1e-3                   # s: the simulator's default step_period
 LEAD, WINDOW = 0.2, 0.02      # s: the actuator's default stream.lead and stream.window
 MAX_POINTS = 2000             # the actuator's default stream.max_points
@@ -203,4 +204,29 @@ def test_listed_scenarios_move_the_part_the_same_on_every_path(scenario: dict[st
 def test_every_path_moves_the_part_the_same(scenario: dict[str, object]) -> None:
     """Not yet passing: about 1 % of drawn scenarios differ by more than the tolerance (take-offs of
     phased actuators with acceleration jumps, parts still flying at the end); run with ``-m paths``."""
+    _check_paths(scenario)
+
+
+@st.composite
+def track_scenarios(draw: st.DrawFn) -> dict[str, object]:
+    """A vibratory track (issue 27): any waveform, inclination, vibration angle, contact and landing law."""
+    waveform = draw(st.sampled_from([w for w in WAVEFORMS if w != 'samples']))
+    beta = draw(st.floats(0.05, 1.3))
+    frequency = draw(st.floats(50.0, 400.0))     # with 5-150 µm: throw numbers ~0.03-90, stick, slide and hop
+    return {
+        'surface.kind': 'track', 'track.inclination': draw(st.floats(-0.3, 0.3)), 'track.vibration_angle': beta,
+        'contact.model': draw(st.sampled_from(['coulomb', 'ke'])), 'contact.mu': draw(st.floats(0.1, 1.0)),
+        'landing.law': draw(st.sampled_from(['keep', 'coulomb', 'stick'])),
+        'stroke.waveform': waveform, 'stroke.count': draw(st.integers(1, 6)), 'stroke.frequency': frequency,
+        'stroke.amplitude': draw(st.floats(5e-6, 150e-6)),
+        'stroke.duty': draw(st.floats(0.1, 0.9)), 'stroke.delay': draw(st.sampled_from([0.0, 1e-3])),
+        'particle.x0': 0.0,
+    }
+
+
+@settings(max_examples=TRACK_EXAMPLES, derandomize=True, deadline=None, database=None,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
+@given(scenario=track_scenarios())
+def test_every_path_moves_a_part_on_a_track_the_same(scenario: dict[str, object]) -> None:
+    """simulate, the stepped simulator fed the actuator's bytes, and sweep agree on drawn track scenarios."""
     _check_paths(scenario)

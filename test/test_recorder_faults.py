@@ -77,6 +77,9 @@ def info(log: Path) -> str:
     return done.stdout
 
 
+RECORDER_COUNTERS_S = 2.5   # s of recording after which the recorder's 1 Hz counters are in its log
+
+
 def size(path: Path) -> int:
     return path.stat().st_size if path.is_file() else 0
 
@@ -214,6 +217,7 @@ def test_a_killed_recorder_process_does_not_disturb_the_run_and_its_log_says_it_
     run = start_run('--duration', '8')
     try:
         wait_until(lambda: size(log / 'log_0.mcap') > 50_000, 30, what='the run recorded')
+        time.sleep(RECORDER_COUNTERS_S)     # its counters on /diagnostics (1 Hz) are in the log by then
         recorder.kill()
         recorder.wait()
     finally:

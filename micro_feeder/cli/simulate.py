@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import math
 import sys
 import time
 from pathlib import Path
@@ -104,9 +105,14 @@ def run(args: argparse.Namespace) -> int:
 def describe(model: FeederModel) -> str:
     """One line naming the stroke and the part's position."""
     s = model.stroke
-    return (f'{s.waveform} stroke {s.amplitude * 1e6:g} um at {s.frequency:g} Hz x {s.count}, '
-            f'{model.n_actuators} actuator(s), part at x0 = {model.particle.x0 * 1e3:g} mm, '
-            f'contact {model.contact.preset}')
+    if model.surface.kind == 'track':
+        surface = (f'track at {math.degrees(model.track.inclination):g} deg, vibrating at '
+                   f'{math.degrees(model.track.vibration_angle):g} deg to it')
+    else:
+        surface = f'{model.n_actuators} actuator(s)'
+    contact = f'coulomb mu = {model.contact.mu:g}' if model.contact.model == 'coulomb' else model.contact.preset
+    return (f'{s.waveform} stroke {s.amplitude * 1e6:g} um at {s.frequency:g} Hz x {s.count}, {surface}, '
+            f'part at x0 = {model.particle.x0 * 1e3:g} mm, contact {contact}, landing {model.landing.law}')
 
 
 def format_summary(summary: dict[str, Any]) -> str:
@@ -118,4 +124,7 @@ def format_summary(summary: dict[str, Any]) -> str:
                                                    ' (not settled: the distance is not where the part rests)'),
         f'transitions  {counts}',
         f"max speed    {summary['max_speed_mps'] * 1e3:.4g} mm/s",
+        *([f"conveying    {summary['mean_velocity_mps'] * 1e3:.6g} mm/s mean over the burst's second half"]
+          if summary.get('mean_velocity_mps') is not None else []),
+        *([f"throw number {summary['throw_number']:.4g}"] if summary.get('throw_number') is not None else []),
         f"sim time     {summary['sim_time_s'] * 1e3:.4g} ms in {summary['wall_time_s'] * 1e3:.1f} ms wall"])

@@ -16,6 +16,7 @@ from typing import Any
 
 from ..interface.names import TRANSITION_KINDS
 from ..physics.dynamics import FeederModel, SimulationError
+from ..physics.dynamics.conveying import ConveyingWindow
 from ..physics.parameters import ParameterError
 
 REGIMES = ('stuck', 'slides', 'flies')
@@ -23,7 +24,7 @@ REGIMES = ('stuck', 'slides', 'flies')
 CONTACT_INPUTS = ('contact.', 'particle.mass', 'particle.area', 'gravity')
 COUNTERS = TRANSITION_KINDS
 RESULT_COLUMNS = ('distance_m', 'distance_per_stroke_m', 'settled', 'regime', 'final_mode', 'final_offset_m',
-                  *COUNTERS, 'max_speed_mps', 'sim_time_s', 'error')
+                  *COUNTERS, 'max_speed_mps', 'mean_velocity_mps', 'throw_number', 'sim_time_s', 'error')
 
 
 def regime(transitions: Mapping[str, int]) -> str:
@@ -73,23 +74,31 @@ def evaluate(job: Job, changes: Mapping[str, float]) -> dict[str, Any]:
     try:
         model = model_for(job, changes)
         state = model.initial_state()
-        if job.duration:
-            model.advance(state, job.duration)
-        else:       # the default length, then on until the part is stuck again (integration.settle_max)
-            model.advance(state, model.default_duration())
+        end = job.duration or model.default_duration()
+        window = ConveyingWindow.of(model.stroke)
+        at_marks = []
+        if window is not None and window.t_end <= end:    # the mean velocity's periods: x exactly there
+            for mark in window.marks:
+                model.advance(state, mark)
+                at_marks.append(state.x)
+        model.advance(state, end)
+        if not job.duration:       # the default length, then on until the part is stuck again (settle_max)
             model.settle(state)
         settled = state.mode == 'stuck'
+        conveying = {name: None if math.isnan(value) else value     # not applicable: empty, as simulate's JSON
+                     for name, value in model.conveying_figures(window.velocity(*at_marks) if at_marks
+                                                                else math.nan).items()}
     except (ParameterError, SimulationError) as err:
         nan = math.nan
         return {'distance_m': nan, 'distance_per_stroke_m': nan, 'settled': False, 'regime': 'error',
                 'final_mode': '', 'final_offset_m': nan, **dict.fromkeys(COUNTERS, 0), 'max_speed_mps': nan,
-                'sim_time_s': nan, 'error': str(err)}
+                'mean_velocity_mps': None, 'throw_number': None, 'sim_time_s': nan, 'error': str(err)}
     counts = state.transitions
     distance = state.distance if settled else math.nan
     return {'distance_m': distance, 'distance_per_stroke_m': distance / model.stroke.count,
             'settled': settled, 'regime': regime(counts), 'final_mode': state.mode,
-            'final_offset_m': state.distance, **counts, 'max_speed_mps': state.max_speed, 'sim_time_s': state.t,
-            'error': ''}
+            'final_offset_m': state.distance, **counts, 'max_speed_mps': state.max_speed, **conveying,
+            'sim_time_s': state.t, 'error': ''}
 
 
 def evaluate_chunk(job: Job, runs: Sequence[tuple[int, Mapping[str, float]]]) -> list[dict[str, Any]]:

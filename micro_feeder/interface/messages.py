@@ -201,16 +201,22 @@ class SurfaceMarkers:
     ``basis @ strokes``).
     """
 
-    def __init__(self, xs: np.ndarray, centers: Sequence[float], widths: Sequence[float], part_size: float):
+    def __init__(self, xs: np.ndarray, centers: Sequence[float], widths: Sequence[float], part_size: float,
+                 track_lift: float | None = None):
         xs = np.asarray(xs, dtype=float)
         self._part_size = part_size
-        self._basis = surface_profile(xs, np.eye(len(centers)), centers, widths)    # (points, actuators)
+        # (points, actuators); a track (``track_lift`` = sin β) is flat at s sin β, drawn around the part
+        self._basis = surface_profile(xs, np.eye(len(centers)), centers, widths) if track_lift is None else \
+            np.full((xs.size, 1), track_lift)
+        self._around_part = None if track_lift is None else xs - float(np.mean(xs))
         self._line = np.zeros((xs.size, 3))                                          # x, y, z per point
         self._line[:, 0] = xs
         self._templates: dict[str, SerializedTemplate] = {}
 
     def update(self, obs: Observation, stamp: Time) -> bytes:
         """The serialized MarkerArray of ``obs`` at ``stamp``."""
+        if self._around_part is not None:
+            self._line[:, 0] = obs.x + self._around_part
         self._line[:, 2] = self._basis @ obs.strokes
         template = self._templates.get(obs.mode)
         if template is None:

@@ -17,7 +17,10 @@ def static_limit(params: Mapping[str, Any]) -> Callable[[np.ndarray], np.ndarray
     from ..physics.contact.model import ContactModel
     from ..physics.contact.params import ContactParams
     from ..physics.particle import ParticleParams
-    model = ContactModel(ContactParams.from_flat(params), ParticleParams.from_flat(params))
+    contact = ContactParams.from_flat(params)
+    if contact.model == 'coulomb':
+        return lambda normal_n: contact.mu * np.maximum(np.asarray(normal_n, dtype=float), 0.0)
+    model = ContactModel(contact, ParticleParams.from_flat(params))
     top = model.tables.load_n[-1]
 
     def q_max(normal_n: np.ndarray) -> np.ndarray:

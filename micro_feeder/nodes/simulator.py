@@ -411,7 +411,10 @@ class Simulator(Node):
         surface = self._stepper.model.surface
         c, w = np.asarray(surface.centers), np.asarray(surface.widths)
         xs = np.linspace(float(np.min(c - 4 * w)), float(np.max(c + 4 * w)), MARKER_POINTS)
-        self._markers = messages.SurfaceMarkers(xs, surface.centers, surface.widths, PART_SIZE)
+        track = self._stepper.model.track
+        self._markers = messages.SurfaceMarkers(
+            xs, surface.centers, surface.widths, PART_SIZE,
+            math.sin(track.vibration_angle) if surface.kind == 'track' else None)
 
     # -- commands -----------------------------------------------------------------------------------
 

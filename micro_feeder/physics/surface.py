@@ -16,6 +16,23 @@ import numpy as np
 from ._jit import jit_inline
 from .parameters import ParameterError, ParameterGroup, param
 
+SURFACE_KINDS = ('bumps', 'track')
+
+
+@dataclass(frozen=True)
+class TrackParams(ParameterGroup):
+    """A rigid vibratory track (surface.kind 'track'; docs/tracks.md): flat, rising at ``inclination`` to the
+    horizontal, vibrating as one body along a line at ``vibration_angle`` to its surface; its displacement
+    along that line is the stroke s(t)."""
+
+    prefix = 'track'
+
+    inclination: float = param(0.0, 'track angle alpha to the horizontal (positive: x runs uphill)', 'rad',
+                               ge=-1.2, le=1.2)
+    vibration_angle: float = param(0.5235987755982988, 'angle beta of the vibration line to the track surface '
+                                   '(x_p = s cos beta, z_p = s sin beta)', 'rad', ge=-1.5707963267948966,
+                                   le=1.5707963267948966)
+
 
 @dataclass(frozen=True)
 class SurfaceParams(ParameterGroup):
@@ -30,12 +47,18 @@ class SurfaceParams(ParameterGroup):
                           min_length=1, ge=1e-7, le=1.0)
     cutoff: float = param(1e-12, 'relative cutoff: an actuator is skipped where its bump is below this '
                           'fraction of its peak (0: exact full sum)', ge=0.0, le=1e-3)
+    kind: str = param('bumps', "'bumps': a flexible surface pushed up by the actuators (centers, widths); "
+                      "'track': a rigid vibratory track moving as one body along track.vibration_angle, its "
+                      'displacement the stroke (one actuator)', choices=SURFACE_KINDS)
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if len(self.widths) != len(self.centers):
             raise ParameterError('surface.widths', list(self.widths),
                                  f'one width per actuator ({len(self.centers)} surface.centers)')
+        if self.kind == 'track' and len(self.centers) != 1:
+            raise ParameterError('surface.centers', list(self.centers),
+                                 "a track (surface.kind 'track') moves as one body: one actuator, one centre")
         if any(b < a for a, b in zip(self.centers, self.centers[1:], strict=False)):
             raise ParameterError('surface.centers', list(self.centers),
                                  'actuators listed in increasing order along the feeder (list them by position, '

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from ..physics.contact import ContactModel, ContactParams
+from ..physics.contact import ContactLaw, ContactParams, contact_law
 from ..physics.dynamics import EventList, FeederModel, Observation
 from ..physics.particle import ParticleParams
 from ..physics.trajectory import CommandLimits, check_table
@@ -28,9 +28,9 @@ JOIN_TOLERANCE = (1e-9, 1e-5)    # m, m/s: a late trajectory joins the stroke in
 
 
 @functools.lru_cache(maxsize=4)
-def _contact_model(contact: ContactParams, particle: ParticleParams) -> ContactModel:
+def _contact_model(contact: ContactParams, particle: ParticleParams) -> ContactLaw:
     """Contact tables are the slow part of a model (~1 s): share them between models in one process."""
-    return ContactModel(contact, particle)
+    return contact_law(contact, particle)
 
 
 def build_model(flat: Mapping[str, Any]) -> FeederModel:

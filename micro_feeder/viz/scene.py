@@ -61,12 +61,14 @@ class FeederScene:
     """Builds ``foxglove.SceneUpdate`` messages of one feeder geometry (actuator ``centers`` and Gaussian
     ``widths``, m)."""
 
-    def __init__(self, centers: Sequence[float], widths: Sequence[float], part_size: float = PART_SIZE):
+    def __init__(self, centers: Sequence[float], widths: Sequence[float], part_size: float = PART_SIZE,
+                 track_lift: float | None = None):
         self.centers = np.asarray(centers, dtype=float)
         self.widths = np.asarray(widths, dtype=float)
         if self.centers.shape != self.widths.shape or self.centers.ndim != 1 or not self.centers.size:
             raise ValueError(f'one width per actuator: {len(self.centers)} centers, {len(self.widths)} widths')
         self.part_size = part_size
+        self.track_lift = track_lift        # a track (sin β): flat at s sin β, drawn around the part
         self.xs = np.linspace(float(np.min(self.centers - 4 * self.widths)),
                               float(np.max(self.centers + 4 * self.widths)), SURFACE_POINTS)
 
@@ -78,10 +80,14 @@ class FeederScene:
         if strokes.shape != self.centers.shape:
             raise ValueError(f'{strokes.size} strokes for {self.centers.size} actuators')
         stamp = _timestamp(t_ns)
-        heights = surface_profile(self.xs, strokes, self.centers, self.widths)
+        if self.track_lift is None:
+            xs, heights = self.xs, surface_profile(self.xs, strokes, self.centers, self.widths)
+        else:
+            xs = x + self.xs - float(np.mean(self.xs))
+            heights = np.full(xs.size, self.track_lift * float(strokes[0]))
         surface = SceneEntity(timestamp=stamp, frame_id=FEEDER_FRAME, id='surface', lines=[LinePrimitive(
             thickness=3.0, scale_invariant=True, color=_color((0.55, 0.6, 0.75)),
-            points=[Point3(x=float(px), y=0.0, z=float(pz)) for px, pz in zip(self.xs, heights, strict=True)])])
+            points=[Point3(x=float(px), y=0.0, z=float(pz)) for px, pz in zip(xs, heights, strict=True)])])
         return SceneUpdate(entities=[surface, self._actuators(stamp, strokes), self._part(stamp, x, z, theta, mode)])
 
     def transforms(self, t_ns: int, x: float, z: float, theta: float) -> FrameTransforms:

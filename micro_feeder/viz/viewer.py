@@ -42,6 +42,7 @@ from ..interface import stamps, wire
 from ..interface.stamps import header_stamp_ns
 from ..logs.schemas import schema_text
 from ..logs.sim_parameters import parameter_value
+from ..physics.surface import TrackParams
 from .endpoint import Endpoint
 from .scene import PART_SIZE, FeederScene
 
@@ -319,8 +320,10 @@ class Viewer:
             event = self._latest('parameters')
             values = {p.name: parameter_value(p.value) for p in event.new_parameters} if event else {}
             try:
+                track = values.get('surface.kind') == 'track'
+                lift = math.sin(values.get('track.vibration_angle', TrackParams.vibration_angle)) if track else None
                 self._scene = FeederScene(values.get('surface.centers', []), values.get('surface.widths', []),
-                                          PART_SIZE)
+                                          PART_SIZE, lift)
             except ValueError:
                 self._scene = None
         return self._scene

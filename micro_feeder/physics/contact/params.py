@@ -12,6 +12,7 @@ from typing import Any
 from ..parameters import ParameterError, ParameterGroup, param
 
 FRICTION_LAWS = ('ke', 'elastic_only', 'linear_to_6')
+CONTACT_LAWS = ('ke', 'coulomb')
 
 # What each preset sets (docs/contact.md §6). Fields not listed take the seed's Table 1 defaults.
 PRESETS: dict[str, dict[str, Any]] = {
@@ -32,6 +33,11 @@ class ContactParams(ParameterGroup):
 
     prefix = 'contact'
 
+    model: str = param('ke', "'ke': rough-surface adhesion and load-dependent friction (the seed's Kogut-Etsion "
+                       "model, the other contact.* parameters); 'coulomb': Q_max = mu max(N, 0), no adhesion",
+                       choices=CONTACT_LAWS)
+    mu: float = param(0.5, "friction coefficient of contact.model 'coulomb', and of landing.law 'coulomb'", '',
+                      ge=0.0, le=1e6)
     preset: str = param('seed_paper', 'named parameter set applied before explicit values',
                         choices=tuple(PRESETS))
     sigma: float = param(20e-9, 'standard deviation of the asperity summit heights', 'm', gt=0)

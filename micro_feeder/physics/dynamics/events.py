@@ -26,6 +26,8 @@ from .layout import (
     IV_STICK_TO_SLIP,
     IV_TAKE_OFF,
     LANDING,
+    LANDING_COULOMB,
+    LANDING_STICK,
     REVERSAL,
     SLIDING,
     SLIP_TO_STICK,
@@ -171,7 +173,7 @@ def adhesion_floor(mode: int, t: float, h: float, y0: np.ndarray, f0: np.ndarray
     |g|, |g'| w, |g''| w² are at most 1, e^(−1/2), 1, and V bounds |ẋ| on the interpolant. Felt: within
     the cutoff of any x the interpolant reaches. A floor above 0 proves that the margin has no dip to find.
     """
-    if mode == FLYING or model.piezo or model.has_base:
+    if mode == FLYING or model.piezo or model.has_base or model.track:
         return -math.inf
     reach = interpolant_reach(0, h, y0, f0, y1, f1, work, dense)
     speed = abs(y0[1]) + interpolant_reach(1, h, y0, f0, y1, f1, work, dense) if model.convective else 0.0
@@ -298,10 +300,16 @@ def transition(which: int, t: float, y: np.ndarray, model: KernelModel, src: tup
     the event kind. ``y`` is rewritten for the new mode."""
     mode = iv[IV_MODE]
     base_acc = strokes_at(t, y, model, src, cur, st, aux, 0.0)
-    if mode == FLYING:                                     # landing: keep the tangential velocity
+    if mode == FLYING:                                     # landing: landing.law
         _h, hx, _hxx, ht, _htt, _hxt = surface_here(y[0], st, model, aux)
         surface_vz = ht if model.landing_relative else 0.0
         xd = (y[1] + hx * (y[3] - surface_vz)) / (1.0 + hx * hx)
+        if model.landing_law == LANDING_STICK:
+            xd = 0.0
+        elif model.landing_law == LANDING_COULOMB:     # |Δv_t| ≤ μ |Δv_n|: the normal velocity lost, relative
+            length = math.sqrt(1.0 + hx * hx)
+            normal_lost = abs(y[3] - ht - hx * y[1]) / length
+            xd = sign(xd) * max(abs(xd) - model.landing_mu * normal_lost / length, 0.0)
         y[1] = xd
         y[2] = 0.0
         y[3] = 0.0

@@ -5,8 +5,11 @@ Data passed around the kernel (all SI):
 
 * ``model``: a :class:`KernelModel`, the immutable inputs by name;
 * ``src``: a :class:`~micro_feeder.physics.waveforms.StrokeTable` as a tuple; channels 0..n_act-1 are
-  the actuators, channel n_act (present when ``model.has_base``) the horizontal base acceleration of
-  the test-only flat-surface check (its s̈ is the base acceleration);
+  the actuators (a track's one channel is its displacement along the vibration line; the kernel works in
+  the frame that follows the track's tangential motion, whose acceleration s̈ cos β and gravity's g sin α
+  along the track act on the part as a base acceleration, and whose surface is flat at height s sin β),
+  channel n_act (present when ``model.has_base``) the horizontal base acceleration of the test-only
+  flat-surface check (its s̈ is the base acceleration);
 * ``y``: state vector. In contact ``[x, ẋ, 0, 0]``, in flight ``[x, v_x, z, v_z]``; then, with the piezo
   model, ``[s_k, ṡ_k]`` per actuator;
 * ``iv`` (int64) and ``fs`` (float64): discrete state and bookkeeping, indexed by ``IV_*`` / ``FS_*``;
@@ -23,6 +26,7 @@ from typing import NamedTuple
 import numpy as np
 
 STUCK, SLIDING, FLYING = 0, 1, 2
+LANDING_KEEP, LANDING_COULOMB, LANDING_STICK = 0, 1, 2      # landing.law, in LANDING_LAWS order
 
 
 class KernelModel(NamedTuple):
@@ -43,6 +47,10 @@ class KernelModel(NamedTuple):
     piezo_zeta: float           # piezo stack damping ratio
     piezo_min: float            # piezo travel limits (m)
     piezo_max: float
+    lift: float                 # track: sin β, the normal part of the vibration (0 for bumps)
+    shake: float                # track: cos β, the tangential part of the vibration (0 for bumps)
+    slope_acc: float            # track: g sin α, gravity along the track (m/s², 0 for bumps)
+    landing_mu: float           # landing law coulomb: μ of the tangential impulse
     adaptive: bool              # DOPRI5 (else fixed-step RK4)
     threshold: bool             # the seed's threshold-velocity friction logic (else exact events)
     dip_search: bool            # event_search 'dips': margins' minima inside steps are searched
@@ -51,6 +59,7 @@ class KernelModel(NamedTuple):
     landing_relative: bool      # landing keeps the velocity relative to the surface
     piezo: bool                 # piezo stack dynamics integrated (state y[4:])
     has_base: bool              # test-only base-acceleration channel after the actuators
+    track: bool                 # a rigid track (surface.kind track): flat, moving along β; channel 0 its stroke
     record: bool                # write one output row per step and event
     centers: np.ndarray         # actuator centres (m), in increasing order
     widths: np.ndarray          # actuator widths (m)
@@ -60,6 +69,7 @@ class KernelModel(NamedTuple):
     gap_m: np.ndarray           # flight table: gap (m) ...
     attraction_n: np.ndarray    # ... and adhesive attraction (N)
     n_actuators: int
+    landing_law: int            # LANDING_KEEP, LANDING_COULOMB or LANDING_STICK
 
 
 # iv: discrete state. IV_ENTRY_COUNTER: the counter incremented when the current mode was entered (-1

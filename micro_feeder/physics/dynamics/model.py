@@ -27,15 +27,16 @@ from typing import Any
 
 import numpy as np
 
-from ..contact import ContactModel, ContactParams
+from ..contact import ContactParams, contact_law
 from ..particle import ParticleParams
 from ..piezo import PiezoParams
-from ..surface import SurfaceParams
+from ..surface import SurfaceParams, TrackParams
 from ..waveforms import StrokeParams, StrokeSchedule, StrokeTable, stack_tables, waveform_table
 from . import kernel as k
 from . import layout
+from .conveying import ConveyingWindow, throw_number
 from .event_list import MODES, TRANSITION_KINDS, EventList
-from .params import DetachParams, IntegrationParams, LandingParams
+from .params import LANDING_LAWS, DetachParams, IntegrationParams, LandingParams
 
 
 class SimulationError(RuntimeError):
@@ -166,6 +167,7 @@ class RunResult:
     data: np.ndarray
     events: EventList
     state: FeederState
+    conveying: dict[str, float] = field(default_factory=dict)
 
     def __getitem__(self, name: str) -> np.ndarray:
         """One column by name (``t``, ``x``, ``friction``, ``stroke_0`` ...)."""
@@ -179,10 +181,12 @@ class RunResult:
     def summary(self) -> dict[str, Any]:
         """Net distance (m), whether the part settled (stuck at the end: a part still sliding or in
         flight has not arrived, and its position is not a distance travelled), final mode, transition
-        counts, max speed (m/s), sim time (s)."""
+        counts, max speed (m/s), sim time (s), and the conveying figures (:meth:`FeederModel.conveying_figures`,
+        None where there is none)."""
         return {'distance_m': self.state.distance, 'settled': self.state.mode == 'stuck',
                 'final_mode': self.state.mode, 'transitions': self.state.transitions,
-                'max_speed_mps': self.state.max_speed, 'sim_time_s': self.state.t}
+                'max_speed_mps': self.state.max_speed, 'sim_time_s': self.state.t,
+                **{k: None if math.isnan(v) else v for k, v in self.conveying.items()}}
 
 
 @dataclass(frozen=True)
@@ -199,6 +203,7 @@ class FeederModel:
     particle: ParticleParams = field(default_factory=ParticleParams)
     contact: ContactParams = field(default_factory=ContactParams)
     surface: SurfaceParams = field(default_factory=SurfaceParams)
+    track: TrackParams = field(default_factory=TrackParams)
     stroke: StrokeParams = field(default_factory=StrokeParams)
     piezo: PiezoParams = field(default_factory=PiezoParams)
     integration: IntegrationParams = field(default_factory=IntegrationParams)
@@ -209,21 +214,26 @@ class FeederModel:
 
     def __post_init__(self) -> None:
         if self.contact_model is None:
-            object.__setattr__(self, 'contact_model', ContactModel(self.contact, self.particle))
+            object.__setattr__(self, 'contact_model', contact_law(self.contact, self.particle))
         object.__setattr__(self, '_waveform', waveform_table(self.stroke, self.surface.n_actuators))
         surface, integration, piezo = self.surface, self.integration, self.piezo
+        track = surface.kind == 'track'
+        alpha, beta = self.track.inclination, self.track.vibration_angle
+        gravity = self.particle.gravity * (math.cos(alpha) if track else 1.0)     # its part normal to the surface
         scalars = dict(
-            mass=self.particle.mass, gravity=self.particle.gravity, pull_off=self.contact_model.pull_off_n,
+            mass=self.particle.mass, gravity=gravity, pull_off=self.contact_model.pull_off_n,
             dt=integration.dt, tolerance=integration.tolerance, check_step=integration.check_step,
             event_tolerance=integration.event_tolerance, cutoff_radius=surface.cutoff_radius,
             min_width=min(surface.widths), max_width=max(surface.widths),
             piezo_omega=piezo.omega_n, piezo_zeta=piezo.damping, piezo_min=piezo.stroke_min,
-            piezo_max=piezo.stroke_max)
+            piezo_max=piezo.stroke_max, lift=math.sin(beta) if track else 0.0,
+            shake=math.cos(beta) if track else 0.0,
+            slope_acc=self.particle.gravity * math.sin(alpha) if track else 0.0, landing_mu=self.contact.mu)
         flags = dict(
             adaptive=integration.method == 'dopri5', threshold=integration.friction_logic == 'threshold',
             dip_search=integration.event_search == 'dips', convective=integration.convective_terms,
             include_weight=self.detach.include_weight, landing_relative=self.landing.velocity == 'relative',
-            piezo=piezo.enabled, has_base=self.base_acceleration is not None, record=False)
+            piezo=piezo.enabled, has_base=self.base_acceleration is not None, track=track, record=False)
         tables = {name: np.ascontiguousarray(getattr(self.contact_model.tables, name), dtype=float)
                   for name in ('load_n', 'q_max_n', 'separation_m', 'gap_m', 'attraction_n')}
         # one numba type whatever the Python types the settings arrived in (no recompilation)
@@ -231,7 +241,7 @@ class FeederModel:
             **{name: float(value) for name, value in scalars.items()},
             **{name: bool(value) for name, value in flags.items()}, **tables,
             centers=np.asarray(surface.centers, dtype=float), widths=np.asarray(surface.widths, dtype=float),
-            n_actuators=int(surface.n_actuators))
+            n_actuators=int(surface.n_actuators), landing_law=LANDING_LAWS.index(self.landing.law))
         object.__setattr__(self, '_kernel_model', packed)
         object.__setattr__(self, '_recording_model', packed._replace(record=True))
 
@@ -243,8 +253,8 @@ class FeederModel:
         """
         groups = {name: group.from_flat(flat) for name, group in (
             ('particle', ParticleParams), ('contact', ContactParams), ('surface', SurfaceParams),
-            ('stroke', StrokeParams), ('piezo', PiezoParams), ('integration', IntegrationParams),
-            ('detach', DetachParams), ('landing', LandingParams))}
+            ('track', TrackParams), ('stroke', StrokeParams), ('piezo', PiezoParams),
+            ('integration', IntegrationParams), ('detach', DetachParams), ('landing', LandingParams))}
         return cls(**groups, **overrides)
 
     def replace(self, **changes: Any) -> FeederModel:
@@ -253,7 +263,7 @@ class FeederModel:
         keep_contact = 'contact' not in changes and 'particle' not in changes
         contact_model = changes.pop('contact_model', self.contact_model if keep_contact else None)
         current = {name: getattr(self, name) for name in (
-            'particle', 'contact', 'surface', 'stroke', 'piezo', 'integration', 'detach', 'landing',
+            'particle', 'contact', 'surface', 'track', 'stroke', 'piezo', 'integration', 'detach', 'landing',
             'base_acceleration')}
         return FeederModel(**{**current, **changes}, contact_model=contact_model)
 
@@ -314,15 +324,30 @@ class FeederModel:
         events: list[EventList] = []
         stops = [t_end] if output_step is None else \
             [*np.arange(state.t + output_step, t_end, output_step).tolist(), t_end]
-        for t_stop in stops:
+        window = ConveyingWindow.of(self.stroke) if source is None and state.t == 0.0 else None
+        marks = window.marks if window is not None and window.t_end <= t_end else ()
+        at_marks = []
+        for t_stop in sorted({*stops, *marks}):
             chunk_events, recorded = self._integrate(state, t_stop, source, record=True)
             events.append(chunk_events)
             rows += recorded
+            if t_stop in marks:
+                at_marks.append(state.x)
         if duration is None:
             chunk_events, recorded = self._settle(state, source, None, output_step, record=True)
             events.append(chunk_events)
             rows += recorded
-        return RunResult(self.columns(), np.vstack(rows), EventList.concatenate(events), state)
+        return RunResult(self.columns(), np.vstack(rows), EventList.concatenate(events), state,
+                         self.conveying_figures(window.velocity(*at_marks) if marks else math.nan))
+
+    def throw_number(self) -> float:
+        """Γ of a track (:func:`~.conveying.throw_number`); NaN for a bump surface."""
+        return throw_number(self.surface, self.track, self.stroke, self.particle.gravity)
+
+    def conveying_figures(self, mean_velocity: float) -> dict[str, float]:
+        """``mean_velocity_mps`` over the burst's second half of whole periods (NaN for one stroke, a run that
+        ends before it, or another source than the configured strokes) and ``throw_number`` (NaN for bumps)."""
+        return {'mean_velocity_mps': mean_velocity, 'throw_number': self.throw_number()}
 
     def _settle(self, state: FeederState, source: StrokeTable | StrokeSchedule | None, max_time: float | None,
                 step: float | None, record: bool) -> tuple[EventList, list[np.ndarray]]:

@@ -10,6 +10,7 @@ FRICTION_LOGICS = ('events', 'threshold')
 METHODS = ('dopri5', 'rk4')
 EVENT_SEARCHES = ('dips', 'step_ends')
 LANDING_VELOCITIES = ('relative', 'absolute')
+LANDING_LAWS = ('keep', 'coulomb', 'stick')
 
 
 @dataclass(frozen=True)
@@ -54,10 +55,13 @@ class DetachParams(ParameterGroup):
 
 @dataclass(frozen=True)
 class LandingParams(ParameterGroup):
-    """What velocity a landing part keeps (docs/dynamics.md §1)."""
+    """What velocity a landing part keeps (docs/dynamics.md §1, docs/tracks.md)."""
 
     prefix = 'landing'
 
+    law: str = param('keep', "tangential velocity at a landing: 'keep' it (the seed's rule); 'coulomb': it changes "
+                     'by at most contact.mu times the normal velocity lost (a Coulomb impulse); '
+                     "'stick': the part takes the surface's", choices=LANDING_LAWS)
     velocity: str = param('relative', "'relative': keep the tangential velocity relative to the surface; "
                           "'absolute': keep the tangential component of the absolute velocity (seed)",
                           choices=LANDING_VELOCITIES)
@@ -66,6 +70,6 @@ class LandingParams(ParameterGroup):
 def dynamics_parameter_groups() -> list[type[ParameterGroup]]:
     """The parameter groups of the surface, stroke, piezo and dynamics (for settings.PARAMETER_GROUPS)."""
     from ..piezo import PiezoParams
-    from ..surface import SurfaceParams
+    from ..surface import SurfaceParams, TrackParams
     from ..waveforms import StrokeParams
-    return [SurfaceParams, StrokeParams, PiezoParams, IntegrationParams, DetachParams, LandingParams]
+    return [SurfaceParams, TrackParams, StrokeParams, PiezoParams, IntegrationParams, DetachParams, LandingParams]

@@ -91,6 +91,8 @@ def felt(model: KernelModel, aux: np.ndarray) -> tuple[int, int]:
 def surface_here(x: float, st: np.ndarray, model: KernelModel,
                  aux: np.ndarray) -> tuple[float, float, float, float, float, float]:
     """:func:`surface_at` at ``x`` (m) from the strokes the last :func:`strokes_at` filled in ``st``."""
+    if model.track:                          # flat, at the track's normal displacement s sin β
+        return model.lift * st[0, 0], 0.0, 0.0, model.lift * st[1, 0], model.lift * st[2, 0], 0.0
     first, stop = felt(model, aux)
     return surface_at(x, st[0], st[1], st[2], model.centers, model.widths, model.cutoff_radius, first, stop)
 
@@ -112,7 +114,7 @@ def strokes_at(t: float, y: np.ndarray, model: KernelModel, src: tuple, cur: np.
     aux[AUX_FELT_LO] = lo
     aux[AUX_FELT_HI] = hi
     for k in range(lo, hi):
-        if abs((y[0] - model.centers[k]) / model.widths[k]) > radius:
+        if not model.track and abs((y[0] - model.centers[k]) / model.widths[k]) > radius:
             st[0, k] = st[1, k] = st[2, k] = st[3, k] = 0.0
             continue
         stroke_into(st, k, src, cur, t)
@@ -126,6 +128,8 @@ def strokes_at(t: float, y: np.ndarray, model: KernelModel, src: tuple, cur: np.
                                           model.piezo_min, model.piezo_max)
             st[0, k] = s
             st[1, k] = sd
+    if model.track:
+        return model.shake * st[2, 0] + model.slope_acc
     return st[2, n_act] if model.has_base else 0.0
 
 
@@ -149,9 +153,13 @@ def contact_load(x: float, xd: float, st: np.ndarray, base_acc: float, model: Ke
     acceleration, 0 except in the flat-surface check), and ẍ = (T − T_req) / (m L).
     """
     m = model.mass
-    first, stop = felt(model, aux)
-    h, hx, hxx, ht, htt, hxt, httt, httx, hxxt, hxxx = surface_jet(
-        x, st[0], st[1], st[2], st[3], model.centers, model.widths, model.cutoff_radius, first, stop)
+    if model.track:
+        h, ht, htt, httt = model.lift * st[0, 0], model.lift * st[1, 0], model.lift * st[2, 0], model.lift * st[3, 0]
+        hx = hxx = hxt = httx = hxxt = hxxx = 0.0
+    else:
+        first, stop = felt(model, aux)
+        h, hx, hxx, ht, htt, hxt, httt, httx, hxxt, hxxx = surface_jet(
+            x, st[0], st[1], st[2], st[3], model.centers, model.widths, model.cutoff_radius, first, stop)
     aux[AUX_JET], aux[AUX_JET + 1], aux[AUX_JET + 2], aux[AUX_JET + 3] = hxx, htt, hxt, httt
     aux[AUX_JET + 4], aux[AUX_JET + 5], aux[AUX_JET + 6] = httx, hxxt, hxxx
     length = math.sqrt(1.0 + hx * hx)
@@ -248,7 +256,10 @@ def margin_slopes(mode: int, direction: int, y: np.ndarray, dy: np.ndarray, mode
     hx, hxx, htt, hxt = aux[AUX_HX], aux[AUX_JET], aux[AUX_JET + 1], aux[AUX_JET + 2]
     httt, httx, hxxt, hxxx = aux[AUX_JET + 3], aux[AUX_JET + 4], aux[AUX_JET + 5], aux[AUX_JET + 6]
     n_act = model.n_actuators
-    base, base_rate = (st[2, n_act], st[3, n_act]) if model.has_base else (0.0, 0.0)
+    if model.track:
+        base, base_rate = model.shake * st[2, 0] + model.slope_acc, model.shake * st[3, 0]
+    else:
+        base, base_rate = (st[2, n_act], st[3, n_act]) if model.has_base else (0.0, 0.0)
     hx_rate = hxt + hxx * v
     normal_acc = htt + model.gravity - hx * base
     normal_acc_rate = httt + httx * v - hx_rate * base - hx * base_rate

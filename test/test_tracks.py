@@ -1,0 +1,160 @@
+"""A rigid vibratory track with Coulomb contact, against the closed forms of conveying theory (issue 27;
+docs/tracks.md), each through the paths users take: ``micro-feeder simulate`` and ``micro-feeder sweep``.
+
+* Boothroyd's slip thresholds, forward Aω²/g = (μ cos α + sin α)/(cos β + μ sin β) and backward
+  (μ cos α − sin α)/(cos β − μ sin β), and the flight threshold Γ = 1: no slip (no take-off) at
+  1 − 1e-4 of the threshold amplitude, a slip (a take-off) in the predicted direction at 1 + 1e-4.
+* Hopping with plastic, sticking landings on a horizontal track: the mean velocity over whole periods
+  against the exact closed form (take-off at sin θ_t = 1/Γ, landing at the first root φ_l of
+  sin θ_t + cos θ_t (φ − θ_t) − (φ − θ_t)²/(2Γ) − sin φ = 0, v̄/(Aω cos β) = [cos θ_t (φ_l − θ_t) − sin φ_l
+  + sin θ_t]/(2π)), the root found here by bracketing and bisection (scipy), independent of the simulator.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+
+import pytest
+from scipy.optimize import brentq
+
+from micro_feeder.cli import main
+
+G = 9.81
+FREQUENCY = 100.0                         # Hz
+OMEGA = 2.0 * math.pi * FREQUENCY
+THRESHOLD_MARGIN = 1e-4                   # relative: the thresholds are found to this
+
+
+def _track(alpha: float, beta: float, mu: float, amplitude: float, count: int, landing: str = 'keep') -> list[str]:
+    settings = {'surface.kind': 'track', 'track.inclination': alpha, 'track.vibration_angle': beta,
+                'contact.model': 'coulomb', 'contact.mu': mu, 'landing.law': landing, 'stroke.waveform': 'sine',
+                'stroke.frequency': FREQUENCY, 'stroke.amplitude': amplitude, 'stroke.count': count}
+    return [arg for name, value in settings.items() for arg in ('--set', f'{name}={value!r}')]
+
+
+def _cli_json(*args: str) -> dict:
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main(list(args)) == 0
+    return json.loads(out.getvalue())
+
+
+def _simulate(settings: list[str], duration: float) -> dict:
+    return _cli_json('simulate', *settings, '--duration', repr(duration), '--json', '--out', '/tmp')
+
+
+def _sweep(settings: list[str], name: str, values: list[float], duration: float) -> list[dict]:
+    result = _cli_json('sweep', *settings, '--vary', f'{name}=' + ','.join(map(repr, values)), '--duration',
+                       repr(duration), '--json', '--processes', '1', '--out', '/tmp/test_tracks_sweep')
+    return sorted(result['rows'], key=lambda row: row[name])
+
+
+# (α, β, μ, which threshold comes first): forward on a level or downhill track, backward on steeper ones
+SLIP_CASES = [(0.0, math.pi / 6, 0.5, 'forward'), (-0.1, 0.4, 0.3, 'forward'), (0.1, 0.4, 0.3, 'backward'),
+              (0.3, math.pi / 6, 0.5, 'backward')]
+
+
+def _slip_threshold(alpha: float, beta: float, mu: float, which: str) -> float:
+    """Aω² at which the part first slips (Boothroyd)."""
+    sign = 1.0 if which == 'forward' else -1.0
+    return G * (mu * math.cos(alpha) + sign * math.sin(alpha)) / (math.cos(beta) + sign * mu * math.sin(beta))
+
+
+@pytest.mark.parametrize('alpha, beta, mu, which', SLIP_CASES)
+def test_slip_thresholds_are_boothroyds(alpha: float, beta: float, mu: float, which: str) -> None:
+    threshold = _slip_threshold(alpha, beta, mu, which) / OMEGA ** 2
+    other = 'backward' if which == 'forward' else 'forward'
+    assert _slip_threshold(alpha, beta, mu, other) > _slip_threshold(alpha, beta, mu, which)
+    below, above = threshold * (1 - THRESHOLD_MARGIN), threshold * (1 + THRESHOLD_MARGIN)
+    duration = 2.0 / FREQUENCY
+    for summary in (_simulate(_track(alpha, beta, mu, below, 2), duration),):
+        assert summary['transitions']['stick_to_slip'] == 0, summary
+    moved = _simulate(_track(alpha, beta, mu, above, 2), duration)
+    assert moved['transitions']['stick_to_slip'] > 0, moved
+    assert moved['distance_m'] * (1 if which == 'forward' else -1) > 0, moved
+    rows = _sweep(_track(alpha, beta, mu, threshold, 2), 'stroke.amplitude', [below, above], duration)
+    assert [row['stick_to_slip'] > 0 for row in rows] == [False, True], rows
+
+
+def test_flight_threshold_is_a_throw_number_of_one() -> None:
+    beta, mu = 0.5, 0.4
+    threshold = G / (OMEGA ** 2 * math.sin(beta))
+    below, above = threshold * (1 - THRESHOLD_MARGIN), threshold * (1 + THRESHOLD_MARGIN)
+    duration = 2.0 / FREQUENCY
+    calm, thrown = (_simulate(_track(0.0, beta, mu, a, 2), duration) for a in (below, above))
+    assert calm['transitions']['take_off'] == 0 and thrown['transitions']['take_off'] > 0
+    assert thrown['throw_number'] == pytest.approx(1 + THRESHOLD_MARGIN, rel=1e-12)
+    rows = _sweep(_track(0.0, beta, mu, threshold, 2), 'stroke.amplitude', [below, above], duration)
+    assert [row['take_off'] > 0 for row in rows] == [False, True], rows
+    assert [row['regime'] for row in rows] == ['slides', 'flies']
+
+
+def hopping_velocity_ratio(gamma: float) -> float:
+    """v̄/(Aω cos β) of hopping with plastic, sticking landings on a horizontal track (exact)."""
+    theta = math.asin(1.0 / gamma)
+
+    def gap(phi: float) -> float:     # the part's height above the track, over A sin β, after take-off at θ
+        return math.sin(theta) + math.cos(theta) * (phi - theta) - (phi - theta) ** 2 / (2 * gamma) - math.sin(phi)
+
+    # the first root after θ: gap > 0 just after take-off; step out until it turns negative, then bisect
+    step, phi = 1e-3, theta + 1e-3
+    while gap(phi + step) > 0.0:
+        phi += step
+    landing = brentq(gap, phi, phi + step, xtol=1e-15, rtol=1e-15)
+    return (math.cos(theta) * (landing - theta) - math.sin(landing) + math.sin(theta)) / (2 * math.pi)
+
+
+def test_the_closed_form_itself_at_the_period_doubling_threshold() -> None:
+    gamma = math.sqrt(1 + math.pi ** 2)
+    assert hopping_velocity_ratio(gamma * (1 - 1e-12)) == pytest.approx(math.pi / gamma, rel=1e-6)
+
+
+@pytest.mark.parametrize('gamma', [1.2, 1.5, 2.0, 3.0])
+def test_hopping_with_sticking_landings_conveys_at_the_closed_form(gamma: float) -> None:
+    beta, mu, count = math.pi / 6, 1e4, 12
+    amplitude = gamma * G / (OMEGA ** 2 * math.sin(beta))
+    expected = hopping_velocity_ratio(gamma) * amplitude * OMEGA * math.cos(beta)
+    summary = _simulate(_track(0.0, beta, mu, amplitude, count, landing='stick'), count / FREQUENCY)
+    assert summary['throw_number'] == pytest.approx(gamma, rel=1e-12)
+    assert summary['mean_velocity_mps'] == pytest.approx(expected, rel=1e-3), (summary, expected)
+    rows = _sweep(_track(0.0, beta, mu, amplitude, count, landing='stick'), 'stroke.amplitude', [amplitude],
+                  count / FREQUENCY)
+    assert rows[0]['mean_velocity_mps'] == pytest.approx(expected, rel=1e-3)
+
+
+def test_at_the_period_doubling_threshold_the_part_conveys_at_pi_over_its_gamma() -> None:
+    """Γ = √(1+π²): the hop lasts one whole period and v̄/(Aω cos β) = π/√(1+π²)."""
+    beta, gamma, count = math.pi / 6, math.sqrt(1 + math.pi ** 2) * (1 - 1e-9), 12
+    amplitude = gamma * G / (OMEGA ** 2 * math.sin(beta))
+    summary = _simulate(_track(0.0, beta, 1e4, amplitude, count, landing='stick'), count / FREQUENCY)
+    ratio = summary['mean_velocity_mps'] / (amplitude * OMEGA * math.cos(beta))
+    assert ratio == pytest.approx(math.pi / math.sqrt(1 + math.pi ** 2), rel=1e-6)
+
+
+def test_the_landing_law_sets_the_conveying_speed_of_a_hopping_part() -> None:
+    """Γ = 1.5, μ = 0.5 (FEEDER_THEORY's example): a landing that sticks, one with a Coulomb impulse and one
+    that keeps the tangential velocity convey at 0.32, 0.60 and 0.81 of Aω cos β."""
+    beta, gamma, count = math.pi / 6, 1.5, 120
+    amplitude = gamma * G / (OMEGA ** 2 * math.sin(beta))
+    scale = amplitude * OMEGA * math.cos(beta)
+    ratios = {law: _simulate(_track(0.0, beta, 0.5, amplitude, count, law), count / FREQUENCY)['mean_velocity_mps']
+              / scale for law in ('stick', 'coulomb', 'keep')}
+    swept = _sweep(_track(0.0, beta, 0.5, amplitude, count, 'coulomb'), 'contact.mu', [0.5], count / FREQUENCY)
+    assert swept[0]['mean_velocity_mps'] / scale == ratios['coulomb']
+    assert ratios == pytest.approx({'stick': 0.32, 'coulomb': 0.60, 'keep': 0.81}, abs=0.005), ratios
+
+
+@pytest.mark.parametrize('regime, gamma, mu', [('slides', 0.45, 0.3), ('flies', 1.5, 0.5)])
+def test_the_mean_velocity_converges_with_the_tolerance(regime: str, gamma: float, mu: float) -> None:
+    """Dividing integration.tolerance by 100 changes the mean velocity by less than 1e-4 relative."""
+    beta, count = math.pi / 6, 20
+    amplitude = gamma * G / (OMEGA ** 2 * math.sin(beta))
+    settings = _track(0.0, beta, mu, amplitude, count)
+    coarse, fine = (_simulate([*settings, '--set', f'integration.tolerance={tol!r}'], count / FREQUENCY)
+                    for tol in (1e-10, 1e-12))
+    assert coarse['mean_velocity_mps'] != 0.0
+    assert fine['mean_velocity_mps'] == pytest.approx(coarse['mean_velocity_mps'], rel=1e-4)
+    assert coarse['transitions']['take_off'] > 0 if regime == 'flies' else coarse['transitions']['take_off'] == 0
