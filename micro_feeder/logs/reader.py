@@ -262,6 +262,12 @@ class LogReader:
                     return m
         return None
 
+    def decodes(self, m: LogMessage) -> bool:
+        """Decode ``m`` (once) and say whether it decodes; one that does not is counted and reported as
+        ``messages(..., decoded=True)`` does. For readers that take the fields they need from the bytes and
+        decode only a message whose layout they do not read."""
+        return self._decodes(m)
+
     def _decodes(self, m: LogMessage) -> bool:
         try:
             m.message  # noqa: B018 - decode now
