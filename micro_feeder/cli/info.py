@@ -17,7 +17,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    log = open_log(args.log)
+    log = open_log(args.log, 'info')
     print(format_summary(summarize(log)))
     report_loss(log)
     return 0

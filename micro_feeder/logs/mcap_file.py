@@ -91,12 +91,15 @@ class McapFile:
     ``schemas``/``channels`` by id; ``chunks`` (file order); ``counts`` per channel id of readable
     messages (from the statistics of an intact file); ``start_ns``/``end_ns``; ``metadata`` records;
     ``complete`` (a summary was read); ``truncated`` (the file ends inside a record); ``damage``.
-    ``on_damage`` is called once with each new :class:`Damage`.
+    ``on_damage`` is called once with each new :class:`Damage`; ``progress(bytes)`` with how far the
+    opening's pass over the file got (the CRC check of a complete file, the scan of one without summary).
     """
 
-    def __init__(self, path: Path, on_damage: Callable[[Damage], None] | None = None) -> None:
+    def __init__(self, path: Path, on_damage: Callable[[Damage], None] | None = None,
+                 progress: Callable[[int], None] | None = None) -> None:
         self.path = path
         self.on_damage = on_damage
+        self._progress = progress
         self.schemas: dict[int, Schema] = {}
         self.channels: dict[int, Channel] = {}
         self.chunks: list[ChunkRef] = []
@@ -124,6 +127,7 @@ class McapFile:
             return
         if not self._open_summary():
             self._scan()
+        self._progress = None
 
     # -- reading ------------------------------------------------------------------------------------
     def messages(self, channel_ids: set[int] | None = None, start_ns: int | None = None,
@@ -273,6 +277,8 @@ class McapFile:
                 continue
             self._scan_record(pos, op, length)
             self._read(HEAD + length)
+            if self._progress is not None and op == Opcode.CHUNK:
+                self._progress(end)
             pos = end
             self.readable_bytes = pos
         self.truncated = True   # no DataEnd: the writer did not finish
@@ -298,6 +304,8 @@ class McapFile:
             with memoryview(self._map) as view:      # no copy of the slice
                 crc = zlib.crc32(view[lo:hi], crc)
             self._read(hi - lo)
+            if self._progress is not None:
+                self._progress(hi)
         return crc
 
     def _read(self, n: int) -> None:
