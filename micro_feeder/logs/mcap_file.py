@@ -39,7 +39,7 @@ HEAD = 9                    # opcode (1 byte) + record length (8 bytes)
 FOOTER_LENGTH = 20          # summary start, summary offset start, summary CRC
 MAX_CHUNK_BYTES = 1 << 30   # a declared uncompressed chunk size above this is damage, not data
 KNOWN_OPCODES = frozenset(int(op) for op in Opcode)
-RELEASE_BYTES = 1 << 24    # bytes read through a file's map between two unmappings of its pages
+RELEASE_BYTES = 1 << 22    # bytes read through a file's map between two unmappings of its pages
 CHUNK_CACHE = 4            # uncompressed chunks kept (a replay reads ~4 topics side by side, each chunk once)
 MESSAGE_HEAD = struct.Struct('<HIQQ')   # a message record's channel id, sequence, log time, publish time
 # Parsing a damaged record can raise almost anything (struct, UTF-8, zstd, short reads, MemoryError).
@@ -297,10 +297,10 @@ class McapFile:
                                         'file instead', 0)
 
     def _crc(self, end: int) -> int:
-        """CRC-32 of the file's first ``end`` bytes, in 16 MiB slices."""
+        """CRC-32 of the file's first ``end`` bytes, in slices of :data:`RELEASE_BYTES`."""
         crc = 0
-        for lo in range(0, end, 1 << 24):
-            hi = min(end, lo + (1 << 24))
+        for lo in range(0, end, RELEASE_BYTES):
+            hi = min(end, lo + RELEASE_BYTES)
             with memoryview(self._map) as view:      # no copy of the slice
                 crc = zlib.crc32(view[lo:hi], crc)
             self._read(hi - lo)
