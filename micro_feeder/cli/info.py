@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from ..logs.summary import format_summary, summarize
+from ..progress import Progress
 from ._logs import open_log, report_loss
 
 
@@ -18,6 +19,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     log = open_log(args.log, 'info')
-    print(format_summary(summarize(log)))
+    # a log without the recorder's counters in its summary is read through for its last recorder diagnostics
+    total = log.chunk_bytes(['/diagnostics'])
+    progress, read = Progress('info: reading the log', total >> 20, 'MiB'), 0
+
+    def on_read(size: int) -> None:
+        nonlocal read
+        read += size
+        progress(min(read, total) >> 20)
+
+    log.on_read = on_read
+    try:
+        summary = summarize(log)
+    finally:
+        progress.close()
+    print(format_summary(summary))
     report_loss(log)
     return 0

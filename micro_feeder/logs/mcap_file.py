@@ -92,13 +92,15 @@ class McapFile:
     messages (from the statistics of an intact file); ``start_ns``/``end_ns``; ``metadata`` records;
     ``complete`` (a summary was read); ``truncated`` (the file ends inside a record); ``damage``.
     ``on_damage`` is called once with each new :class:`Damage`; ``progress(bytes)`` with how far the
-    opening's pass over the file got (the CRC check of a complete file, the scan of one without summary).
+    opening's pass over the file got (the CRC check of a complete file, the scan of one without summary);
+    ``on_read(bytes)`` with the size of each chunk read afterwards.
     """
 
     def __init__(self, path: Path, on_damage: Callable[[Damage], None] | None = None,
-                 progress: Callable[[int], None] | None = None) -> None:
+                 progress: Callable[[int], None] | None = None, on_read: Callable[[int], None] | None = None) -> None:
         self.path = path
         self.on_damage = on_damage
+        self.on_read = on_read
         self._progress = progress
         self.schemas: dict[int, Schema] = {}
         self.channels: dict[int, Channel] = {}
@@ -434,6 +436,8 @@ class McapFile:
         cached = self._chunk_cache.get(pos)
         if cached is None:
             cached = self._chunk_cache[pos] = self._read_chunk_record(pos)
+            if self.on_read is not None:
+                self.on_read(HEAD + struct.unpack_from('<Q', self._map, pos + 1)[0])
             while len(self._chunk_cache) > CHUNK_CACHE:
                 self._chunk_cache.popitem(last=False)
         else:

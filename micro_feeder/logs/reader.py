@@ -126,15 +126,17 @@ class LogReader:
 
     def __init__(self, path: Path | str, progress: Callable[[int, int], None] | None = None) -> None:
         """Open the log at ``path``; ``progress(bytes, total bytes)`` is called as the opening reads the files
-        through (their CRC check, or the scan of a file without summary: seconds for an hour at 1 kHz)."""
+        through (their CRC check, or the scan of a file without summary: seconds for an hour at 1 kHz).
+        Afterwards, :attr:`on_read` (when set) is called with the compressed size of each chunk read."""
         self.path = Path(path)
+        self.on_read: Callable[[int], None] | None = None
         self.damage: list[Damage] = []
         self.undecodable: dict[str, int] = {}
         self.files = self._find_files()
         self._decoders: dict[int, Callable[[bytes], Any]] = {}
         self._stamped: dict[int, bool] = {}
         try:
-            self._mcaps = [McapFile(p, self._on_damage, self._file_progress(i, progress))
+            self._mcaps = [McapFile(p, self._on_damage, self._file_progress(i, progress), self._chunk_read)
                            for i, p in enumerate(self.files)]
         except NotMcapError as err:
             raise LogFormatError(str(err)) from None
@@ -166,6 +168,16 @@ class LogReader:
     def duration(self) -> float:
         """Span of the log times [s]."""
         return (self.end_ns - self.start_ns) * 1e-9
+
+    def chunk_bytes(self, topics: Iterable[str] | None = None) -> int:
+        """Bytes of the chunks that hold messages of ``topics`` (all when None): what a pass over their
+        messages reads (:attr:`on_read` counts up to it)."""
+        wanted = None if topics is None else {r for r in map(self.resolve, topics) if r}
+        total = 0
+        for f in self._mcaps:
+            ids = None if wanted is None else {cid for cid, c in f.channels.items() if c.topic in wanted}
+            total += sum(c.length for c in f.chunks if ids is None or c.channels is None or c.channels & ids)
+        return total
 
     @property
     def message_count(self) -> int:
@@ -223,6 +235,10 @@ class LogReader:
         return self._edge(topic, last=True)
 
     # -- internals ----------------------------------------------------------------------------------
+    def _chunk_read(self, size: int) -> None:
+        if self.on_read is not None:
+            self.on_read(size)
+
     def _on_damage(self, damage: Damage) -> None:
         self.damage.append(damage)
         warnings.warn(str(damage), DamagedLogWarning, stacklevel=3)
