@@ -66,10 +66,18 @@ def parameters_event(flat: dict) -> bytes:
     return serialize_message(ParameterEvent(stamp=stamps.to_time(0.0), node='/simulator', new_parameters=params))
 
 
-def diagnostics(t: float, published: int) -> bytes:
-    status = DiagnosticStatus(name='simulator: loop', values=[KeyValue(key='real_time_factor_achieved', value='1.0'),
-                                                               KeyValue(key='states_published', value=str(published))])
-    msg = DiagnosticArray(status=[status])
+def recorder_counters(received: int) -> dict[str, str]:
+    """The recorder's counters (its ``/diagnostics`` status and, on a clean stop, the log's metadata record)."""
+    return {'received_total': str(received), 'lost_total': '0', 'incompatible_qos_total': '0'}
+
+
+def diagnostics(t: float, published: int, received: int) -> bytes:
+    """The simulator's loop status and the recorder's, as each publishes them once a second."""
+    loop = DiagnosticStatus(name='simulator: loop', values=[KeyValue(key='real_time_factor_achieved', value='1.0'),
+                                                             KeyValue(key='states_published', value=str(published))])
+    recorder = DiagnosticStatus(name='recorder: log', values=[KeyValue(key=k, value=v)
+                                                              for k, v in recorder_counters(received).items()])
+    msg = DiagnosticArray(status=[loop, recorder])
     msg.header.stamp = stamps.to_time(t)
     return serialize_message(msg)
 
@@ -124,7 +132,7 @@ def write_long_log(path: Path | str, seconds: float, *, markers: bool = True, pr
         if markers and not i % 40:
             writer.write('/surface/markers', surface_markers.update(obs, state.stamp), log_ns(i, k := k + 1))
         if i and not i % 1000:
-            writer.write('/diagnostics', diagnostics(stepper.t, i), log_ns(i, k := k + 1))
+            writer.write('/diagnostics', diagnostics(stepper.t, i, writer.message_count), log_ns(i, k := k + 1))
         counts['poses'] += 1
         # the actuator hears this step's joint state and keeps LEAD of strokes ahead; the simulator receives
         # each window before its next step (receipt = this step's sim time)
@@ -138,6 +146,7 @@ def write_long_log(path: Path | str, seconds: float, *, markers: bool = True, pr
         if progress and not i % 10_000:
             print(f'\r  {i * STEP:7.1f} of {seconds:g} s sim time, {time.monotonic() - started:5.0f} s', end='',
                   file=sys.stderr, flush=True)
+    writer.custom_data.update(recorder_counters(writer.message_count))
     writer.close()
     if progress:
         print(file=sys.stderr)
