@@ -9,7 +9,7 @@ OUT ?= out
 # All ROS traffic stays on this host unless the caller says otherwise.
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 
-.PHONY: test demo lint bench install constraints clean foxglove-client figures
+.PHONY: test demo lint bench install constraints clean foxglove-client figures performance-doc
 
 install: $(STAMP)
 
@@ -24,7 +24,7 @@ lint: $(STAMP)
 	$(BIN)/lint-imports --no-cache
 
 test: lint foxglove-client
-	$(BIN)/python -m pytest test -m 'not paths'
+	$(BIN)/python -m pytest test -m 'not paths and not slow'
 
 # The real Foxglove WebSocket client the live-view tests use (npm, pinned by package-lock.json; node >= 18).
 FOXGLOVE_CLIENT := test/foxglove_client
@@ -59,9 +59,14 @@ figures: $(STAMP)
 	$(BIN)/micro-feeder sweep --vary stroke.frequency=100:5000:200 --set stroke.count=5 --out $(FIG_OUT) --plot $(IMG)/sweep_frequency.png
 	$(BIN)/micro-feeder run --duration 0.1 --set stroke.count=5 --real-time-factor 0.05 --record $(FIG_OUT)/run
 	$(BIN)/micro-feeder plot $(FIG_OUT)/run -o $(IMG)/run.png
+	$(BIN)/python $(IMG)/nodes_topics.py $(IMG)/nodes_topics.png
 
 bench: $(STAMP) foxglove-client
 	for b in bench/bench_*.py; do $(BIN)/python $$b || exit 1; done
+
+# docs/performance.md and README's table of figures, from what the benchmarks wrote to bench/results/*.json.
+performance-doc: $(STAMP)
+	$(BIN)/python bench/report.py
 
 # Re-pin after changing requirements: freeze a fresh venv, drop the ROS wheels' bare names.
 constraints:

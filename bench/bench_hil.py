@@ -17,7 +17,9 @@ EventsExecutor on the main thread). Children get ROS_AUTOMATIC_DISCOVERY_RANGE=L
 ROS_DOMAIN_ID and a temporary ROS_LOG_DIR. Issue 6 sets no target: the figures are a report.
 
     .venv/bin/python bench/bench_hil.py [--seconds 10] [--warmup 1] [--responder-executor events|single]
-                                        [--feed-seconds 10 | --no-feed]
+                                        [--feed-seconds 10 | --no-feed] [--json PATH | --no-json]
+
+Results (driver only): bench/results/bench_hil.json.
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ import os
 import random
 import shutil
 import signal
+import struct
 import subprocess
 import sys
 import tempfile
@@ -36,6 +39,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import results_json
+from results_json import figure
 
 BENCH = Path(__file__).resolve().parent
 FEED_LEAD = 0.05        # s: command_lead given to the feed controller (its burst stamp = pose stamp + lead)
@@ -58,8 +63,11 @@ def run_simulator(out: Path, ros_args: list[str]) -> int:
             self._publisher, self._sent = publisher, sent
 
         def publish(self, msg: Any) -> None:
-            stamp = msg.header.stamp
-            self._sent[stamp.sec * 1_000_000_000 + stamp.nanosec] = time.perf_counter()
+            if isinstance(msg, bytes | bytearray | memoryview):     # the simulator publishes CDR bytes
+                sec, nanosec = struct.unpack_from('<iI' if msg[1] == 1 else '>iI', msg, 4)
+            else:
+                sec, nanosec = msg.header.stamp.sec, msg.header.stamp.nanosec
+            self._sent[sec * 1_000_000_000 + nanosec] = time.perf_counter()
             self._publisher.publish(msg)
 
         def __getattr__(self, name: str) -> Any:
@@ -241,6 +249,7 @@ def main() -> int:
                         help=argparse.SUPPRESS)
     parser.add_argument('--out', type=Path, help=argparse.SUPPRESS)
     parser.add_argument('ros_args', nargs='*', help=argparse.SUPPRESS)
+    results_json.add_arguments(parser, 'bench_hil')
     args = parser.parse_args()
     if args.role == 'simulator':
         return run_simulator(args.out, args.ros_args)
@@ -251,6 +260,7 @@ def main() -> int:
     tmp = Path(tempfile.mkdtemp(prefix='bench-hil-'))
     env = child_env(str(tmp / 'roslog'))
     load0 = os.getloadavg()
+    started = time.perf_counter()
     try:
         responder = [sys.executable, str(Path(__file__).resolve()), '--role', 'responder',
                      '--responder-executor', args.responder_executor]
@@ -287,6 +297,28 @@ def main() -> int:
         print(f'    in order, ms (knots): {" ".join(f"{v:.1f} ({k})" for v, k in zip(ms, knots, strict=True))}')
         print(f'    CPU: simulator {feed_cpu["simulator"] * 100:.1f} %, feed_controller '
               f'{feed_cpu["controller"] * 100:.1f} % of a core')
+    figures = []
+    if trip.size:
+        figures += [figure(f'round_trip_{name}_ms', f'closed loop: pose published -> command received, {name}',
+                           round(float(value), 3), 'ms',
+                           note=f'responder ({args.responder_executor} executor) in another process answering every '
+                                f'pose; {trip.size} answers' if name == 'p50' else '')
+                    for name, value in (('p50', np.percentile(trip, 50)), ('p99', np.percentile(trip, 99)),
+                                        ('max', trip.max()))]
+    figures.append(figure('simulator_cpu_answered_pct', 'simulator CPU while every pose is answered, % of one core',
+                          round(cpu['simulator'] * 100, 1), '%'))
+    if feed is not None:
+        (ms, _), _ = feed
+        if ms.size:
+            figures.append(figure('burst_margin_min_ms', 'feed controller bursts: smallest margin before their stamp '
+                                  'on arrival', round(float(ms.min()), 1), 'ms', op='>', target=0,
+                                  note=f'{ms.size} bursts, {int(np.sum(ms < 0))} late; largest margin '
+                                       f'{ms.max():.1f} ms; command_lead {FEED_LEAD * 1e3:g} ms'))
+    results_json.save(args, 'bench_hil', 'Closed loop (hardware in the loop)', figures,
+                      load_before=[round(x, 2) for x in load0], seconds=time.perf_counter() - started,
+                      purpose='The simulator at 1 kHz in real time with a controller in another process: the '
+                              'round trip, and the feed controller\'s bursts arriving before their stamps (issue '
+                              '6 sets no target: a report).')
     return 0
 
 

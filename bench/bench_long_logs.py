@@ -14,6 +14,9 @@ A command whose RSS passes ``--rss-cap`` MB or that runs longer than ``--timeout
 as such (the figures up to then are kept).
 
     .venv/bin/python bench/bench_long_logs.py [--minutes 10] [--log DIR] [--commands resim,export,info]
+                                              [--json PATH | --no-json]
+
+Results: bench/results/bench_long_logs.json.
 """
 
 from __future__ import annotations
@@ -28,7 +31,13 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / 'test'))
+sys.path.insert(0, str(ROOT / 'bench'))
+import results_json  # noqa: E402
 from long_log import measure, write_long_log  # noqa: E402  (test/long_log.py: the log and the measuring)
+from results_json import figure  # noqa: E402
+
+RSS_TARGET_MB = 500.0      # peak RSS of any log command, whatever the log's length
+SIGINT_TARGET_S = 1.0      # s from Ctrl-C to exit
 
 
 def report(name: str, r: dict) -> str:
@@ -44,6 +53,25 @@ def report(name: str, r: dict) -> str:
     return '\n'.join(out)
 
 
+def command_figures(command: str, minutes: float, r: dict, interrupted: dict | None) -> list[dict]:
+    """The figures of one command on the log, for bench/results/bench_long_logs.json."""
+    what = f'{command} of a {minutes:g}-minute log'
+    figures = [figure(f'{command}_peak_mb', f'{what}: peak RSS', round(r['peak_mb']), 'MB', op='<=',
+                      target=RSS_TARGET_MB, met=None if not r['killed'] else False,
+                      note=r['killed'] or f'exit {r["status"]}'),
+               figure(f'{command}_wall_s', f'{what}: wall time', round(r['wall_s'], 1), 's',
+                      note='first progress line at '
+                           + (f'{r["first_progress_s"]:.1f} s' if r['first_progress_s'] is not None else '(none)'))]
+    if interrupted is not None and interrupted['sigint_to_exit_s'] is not None:
+        traceback = any('Traceback' in line for line in interrupted['stderr'])
+        figures.append(figure(f'{command}_sigint_s', f'{what}: Ctrl-C to exit',
+                              round(interrupted['sigint_to_exit_s'], 2), 's', op='<=', target=SIGINT_TARGET_S,
+                              met=interrupted['sigint_to_exit_s'] <= SIGINT_TARGET_S and interrupted['status'] == 130
+                              and not traceback,
+                              note=f'exit {interrupted["status"]}, traceback {"YES" if traceback else "no"}'))
+    return figures
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--minutes', type=float, default=10.0, help='sim time of the synthesized log (default 10)')
@@ -53,7 +81,9 @@ def main() -> None:
     parser.add_argument('--timeout', type=float, default=1800.0, help='s: kill a command after this (default 1800)')
     parser.add_argument('--sigint-after', type=float, default=10.0,
                         help='s into a second run of each command to send SIGINT (0: no Ctrl-C runs)')
+    results_json.add_arguments(parser, 'bench_long_logs')
     args = parser.parse_args()
+    load, started, figures = [round(x, 2) for x in os.getloadavg()], time.perf_counter(), []
     scratch = Path(tempfile.mkdtemp(prefix='bench_long_logs_'))
     log = Path(args.log) if args.log else scratch / 'log'
     try:
@@ -68,12 +98,19 @@ def main() -> None:
             r = measure([command, str(log), *extra], rss_cap_mb=args.rss_cap, timeout=args.timeout)
             print(report(command, r), flush=True)
             shutil.rmtree(scratch / 'csv', ignore_errors=True)
+            interrupted = None
             if 0 < args.sigint_after < r['wall_s'] - 2:        # long enough to be interrupted
-                r = measure([command, str(log), *extra], rss_cap_mb=args.rss_cap, timeout=args.timeout,
-                            sigint_after=args.sigint_after)
-                print(report(f'{command} + Ctrl-C at {args.sigint_after:g} s', r), flush=True)
+                interrupted = measure([command, str(log), *extra], rss_cap_mb=args.rss_cap, timeout=args.timeout,
+                                      sigint_after=args.sigint_after)
+                print(report(f'{command} + Ctrl-C at {args.sigint_after:g} s', interrupted), flush=True)
                 shutil.rmtree(scratch / 'csv', ignore_errors=True)
+            figures += command_figures(command, args.minutes, r, interrupted)
         print(f'load average after: {os.getloadavg()}')
+        results_json.save(args, 'bench_long_logs', 'Long logs: resim, info, export', figures, load_before=load,
+                          seconds=time.perf_counter() - started,
+                          purpose=f'log commands on {size / 2**20:.0f} MiB of continuous 1 kHz strokes (what run '
+                                  '--record writes, synthesized by test/long_log.py): memory that does not grow '
+                                  'with the log, progress, Ctrl-C')
     finally:
         shutil.rmtree(scratch / 'csv', ignore_errors=True)
         if not args.log:

@@ -1,7 +1,7 @@
 """Benchmark: the simulator node's own work in the soak's scenario, offline (no ROS graph): where its CPU
 goes, apart from the middleware.
 
-Usage: .venv/bin/python bench/bench_node_work.py [--cases 1,16,64]
+Usage: .venv/bin/python bench/bench_node_work.py [--cases 1,16,64] [--json PATH | --no-json]
 
 Per case (the travelling wave of bench/bench_soak.py: n actuators 1 mm apart, phases (k mod 4)/4, streamed
 as the actuator streams it: 20 ms windows of knots, kept 0.2 s ahead), CPU time of this thread, best of 3:
@@ -15,14 +15,18 @@ as the actuator streams it: 20 ms windows of knots, kept 0.2 s ahead), CPU time 
 No target of its own (a report): it prints the share of bench_soak's CPU targets (25 / 35 / 50 % of a
 core for 1 / 16 / 64 actuators, i.e. 250 / 350 / 500 µs per 1 ms tick) that this work takes. The rest of
 the budget is for publishing (nine messages a tick) and the middleware's threads, which only bench_soak sees.
+Results: bench/results/bench_node_work.json.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
+import results_json
 from bench_soak import CASES, wave_settings
+from results_json import figure
 
 from micro_feeder.interface import messages, stamps, trajectory_cdr
 from micro_feeder.interface.names import joint_names
@@ -95,13 +99,29 @@ def measure(n: int, ticks: int = 1000) -> tuple[float, float, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--cases', default='1,16,64', help='actuator counts, comma-separated (default 1,16,64)')
+    results_json.add_arguments(parser, 'bench_node_work')
     args = parser.parse_args()
+    load = [round(x, 2) for x in os.getloadavg()]
+    started = time.perf_counter()
+    figures = []
     for n in (int(c) for c in args.cases.split(',')):
         tick_us, window_us, windows_per_tick = measure(n)
         share = tick_us + window_us * windows_per_tick
+        figures += [
+            figure(f'tick_{n}_us', f'{n} actuator(s): one 1 ms tick (advance, observe, serialize)', round(tick_us, 1),
+                   'µs'),
+            figure(f'window_{n}_us', f'{n} actuator(s): one streamed window (parse, schedule, limit check)',
+                   round(window_us), 'µs', note=f'{windows_per_tick:.3f} windows per tick'),
+            figure(f'share_{n}_pct', f'{n} actuator(s): tick and windows, share of bench_soak\'s CPU budget '
+                   f'({BUDGET_US[n]:.0f} µs a tick)', round(100 * share / BUDGET_US[n]), '%',
+                   note=f'{share:.1f} µs per 1 ms tick, before publishing')]
         print(f'{n:2d} actuators: tick {tick_us:6.1f} µs, window {window_us:6.0f} µs x {windows_per_tick:.3f} per tick'
               f' = {share:6.1f} µs per 1 ms tick, {100 * share / BUDGET_US[n]:.0f} % of the node budget '
               f'{BUDGET_US[n]:.0f} µs (bench_soak CPU target), before publishing', flush=True)
+    results_json.save(args, 'bench_node_work', 'The simulator node\'s own work, offline', figures, load_before=load,
+                      seconds=time.perf_counter() - started,
+                      purpose='CPU time of what the simulator node does per tick and per streamed window in '
+                              'bench_soak\'s travelling wave, without ROS: a report, no target of its own.')
 
 
 if __name__ == '__main__':

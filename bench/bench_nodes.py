@@ -14,6 +14,9 @@ topic the server advertises (the test client test/foxglove_client, installed by 
 <= 35 %).
 
     .venv/bin/python bench/bench_nodes.py [--seconds 10] [--commands 60] [--viewer-seconds 10]
+                                          [--json PATH | --no-json]
+
+Results: bench/results/bench_nodes.json.
 """
 
 from __future__ import annotations
@@ -28,6 +31,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+import results_json
+from results_json import figure
 
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 os.environ.setdefault('ROS_DOMAIN_ID', str(60 + os.getpid() % 30))
@@ -89,7 +94,10 @@ def main() -> int:
     parser.add_argument('--commands', type=int, default=60, help='trajectory commands for the latency')
     parser.add_argument('--viewer-seconds', type=float, default=10.0,
                         help='window of each live-view CPU measurement (s); 0 skips them')
+    results_json.add_arguments(parser, 'bench_nodes')
     args = parser.parse_args()
+    load_before = [round(x, 2) for x in os.getloadavg()]
+    started = time.perf_counter()
     exe = shutil.which('simulator', path=str(Path(sys.executable).parent))
     proc = subprocess.Popen([exe, '--ros-args', '-p', 'publish_rate:=1000.0'], stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL)
@@ -158,19 +166,39 @@ def main() -> int:
           f'    target: <= 1.5 ms')
     print(f'  command -> pose latency p50 {np.percentile(lat, 50):6.2f} ms, p99 {np.percentile(lat, 99):6.2f} ms '
           f'({lat.size}/{args.commands} commands seen)')
+    figures = [
+        figure('rtf', 'simulator at 1 kHz: achieved real-time factor', round(rtf, 4), '', op='>=', target=0.99,
+               note='target: holds 1.0'),
+        figure('cpu_pct', 'simulator at 1 kHz: CPU of its process, % of one core', round(cpu * 100, 1), '%', op='<=',
+               target=25, note=split),
+        figure('tick_p50_ms', 'simulator at 1 kHz: tick period p50', round(p50, 3), 'ms'),
+        figure('tick_p99_ms', 'simulator at 1 kHz: tick period p99 (median of 1 s windows)',
+               round(float(np.median(p99)), 3), 'ms', op='<=', target=1.5,
+               note=f'worst 1 s window {max(p99):.3f} ms'),
+        figure('command_latency_p50_ms', 'trajectory command -> first pose reflecting it, p50',
+               round(float(np.percentile(lat, 50)), 2), 'ms', note=f'{lat.size}/{args.commands} commands seen'),
+        figure('command_latency_p99_ms', 'trajectory command -> first pose reflecting it, p99',
+               round(float(np.percentile(lat, 99)), 2), 'ms'),
+    ]
+    status = 0
     if args.viewer_seconds > 0:
-        return live_view_cpu(args.viewer_seconds)
-    return 0
+        status, live = live_view_cpu(args.viewer_seconds)
+        figures += live
+    results_json.save(args, 'bench_nodes', 'The simulator node at 1 kHz', figures, load_before=load_before,
+                      seconds=time.perf_counter() - started,
+                      purpose='The simulator as a separate process at 1 kHz publishing, seen by an outside client; '
+                              'then the CPU of a micro-feeder run process with and without the live view.')
+    return status
 
 
 CLIENT = Path(__file__).parents[1] / 'test' / 'foxglove_client'
 
 
-def live_view_cpu(seconds: float) -> int:
+def live_view_cpu(seconds: float) -> tuple[int, list[dict]]:
     """CPU share of ``micro-feeder run`` without --foxglove, with it and no viewer, and with one viewer."""
     if not (CLIENT / 'node_modules').is_dir():
         print(f'live view: skipped, no test client (run: cd {CLIENT} && npm ci)', file=sys.stderr)
-        return 1
+        return 1, []
     load0 = os.getloadavg()[0]
     results = [('run, no --foxglove', _run_cpu(seconds, None, False), 25),
                ('run --foxglove, no viewer', _run_cpu(seconds, 18900 + os.getpid() % 500, False), 25),
@@ -179,7 +207,10 @@ def live_view_cpu(seconds: float) -> int:
           f'(load average {load0:.2f} -> {os.getloadavg()[0]:.2f})')
     for what, cpu, target in results:
         print(f'  {what:38s} {cpu * 100:6.1f} %    target: <= {target} % of one core')
-    return 0
+    keys = ('live_view_off_pct', 'live_view_no_viewer_pct', 'live_view_viewer_pct')
+    return 0, [figure(key, f'live view, micro-feeder {what}: CPU of the process, % of one core', round(cpu * 100, 1),
+                      '%', op='<=', target=target)
+               for key, (what, cpu, target) in zip(keys, results, strict=True)]
 
 
 def _run_cpu(seconds: float, port: int | None, viewer: bool) -> float:

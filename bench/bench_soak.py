@@ -24,7 +24,9 @@ and recorder in one process, 1 actuator), then ``micro-feeder resim LOG``:
 The travelling wave uses phases (k mod 4)/4: 4 distinct stroke starts per period, whatever the count.
 Prints the load average before and after: on a shared 2-core machine the figures move with it.
 
-    .venv/bin/python bench/bench_soak.py [--minutes M] [--cases 1,16,64,run]
+    .venv/bin/python bench/bench_soak.py [--minutes M] [--cases 1,16,64,run] [--json PATH | --no-json]
+
+Results: bench/results/bench_soak.json.
 """
 
 from __future__ import annotations
@@ -40,6 +42,8 @@ import time
 from pathlib import Path
 
 import numpy as np
+import results_json
+from results_json import figure
 
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 os.environ.setdefault('ROS_DOMAIN_ID', str(90 + os.getpid() % 30))
@@ -290,21 +294,78 @@ def report(r: dict) -> str:
     ])
 
 
+def case_figures(r: dict) -> list[dict]:
+    """The JSON figures of one case."""
+    n = r['actuators']
+    rss = max(r['sim_rss_mb_per_min'], r['act_rss_mb_per_min'])
+    counts = [_count(r['underruns']), _count(r['rejected'])]
+    faults = None if None in counts else sum(counts)
+    return [
+        figure(f'rtf_median_{n}', f'{n} actuator(s), {r["minutes"]:.1f} min streamed: median real-time factor',
+               round(r['rtf_median'], 4), '', op='>=', target=0.99, note=f'min {r["rtf_min"]:.4f}'),
+        figure(f'sim_cpu_{n}_pct', f'{n} actuator(s): simulator CPU, % of one core', round(r['sim_cpu_pct'], 1), '%',
+               op='<=', target=r['cpu_target'], note=f'actuator {r["act_cpu_pct"]:.1f} %'),
+        figure(f'rss_growth_{n}', f'{n} actuator(s): RSS growth, the larger of simulator and actuator', round(rss, 3),
+               'MB/min', op='<', target=1.0,
+               note=f'simulator {r["sim_rss_mb_per_min"]:+.3f} ({r["sim_rss_mb"]:.0f} MB), actuator '
+                    f'{r["act_rss_mb_per_min"]:+.3f} ({r["act_rss_mb"]:.0f} MB)'),
+        figure(f'underruns_rejected_{n}', f'{n} actuator(s): stream underruns + rejected commands',
+               faults, '', op='==', target=0,
+               note=f'{r["underruns"]} underruns, {r["rejected"]} rejected, {r["windows"]} windows; warnings logged: '
+                    f'simulator {r["warnings"]["simulator"]}, actuator {r["warnings"]["actuator"]}'),
+    ]
+
+
+def run_figures(r: dict) -> list[dict]:
+    """The run case's figures for bench/results/bench_soak.json."""
+    resim = r['resim']
+    return [
+        figure('run_rtf_median', f'micro-feeder run --record, {r["minutes"]:.1f} min streamed: median real-time factor',
+               round(r['rtf_median'], 4), '', op='>=', target=0.99, note=f'min {r["rtf_min"]:.4f}'),
+        figure('run_rss_mb_per_min', 'micro-feeder run --record: RSS growth', round(r['rss_mb_per_min'], 3), 'MB/min',
+               op='<', target=RUN_RSS_TARGET, note=f'CPU {r["cpu_pct"]:.1f} % of a core'),
+        figure('run_lost', 'micro-feeder run --record: messages the recorder lost', r['lost'], '', op='<=', target=0,
+               note=f'{r["poses"]:,} poses, largest stamp gap {r["max_gap_ms"]:.3f} ms'),
+        figure('run_resim_peak_mb', 'resim of that log: peak RSS', round(resim['peak_mb']), 'MB', op='<=',
+               target=RESIM_RSS_TARGET, note=resim['killed'] or f'wall {resim["wall_s"]:.0f} s'),
+    ]
+
+
+def _count(value: str | int) -> int | None:
+    """A count read from /diagnostics ('?' when it never came)."""
+    try:
+        return int(value)
+    except (TypeError, ValueError):
+        return None
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--minutes', type=float, help='minutes per case (default: 10 / 10 / 2 / 10)')
     parser.add_argument('--cases', default='1,16,64,run',
                         help='cases to run: actuator counts (of 1, 16, 64) and run (micro-feeder run --record)')
+    results_json.add_arguments(parser, 'bench_soak')
     args = parser.parse_args()
     LOG_DIR.mkdir(parents=True, exist_ok=True)
+    load = [round(x, 2) for x in os.getloadavg()]
+    started = time.perf_counter()
     print(f'load average before: {os.getloadavg()}')
+    figures = []
     for case in args.cases.split(','):
         if case == 'run':
-            print(run_report(run_record_case(args.minutes or RUN_MINUTES)), flush=True)
+            result = run_record_case(args.minutes or RUN_MINUTES)
+            print(run_report(result), flush=True)
+            figures += run_figures(result)
             continue
         minutes, cpu_target = CASES[int(case)]
-        print(report(run_case(int(case), args.minutes or minutes, cpu_target)), flush=True)
+        result = run_case(int(case), args.minutes or minutes, cpu_target)
+        print(report(result), flush=True)
+        figures += case_figures(result)
     print(f'load average after: {os.getloadavg()}')
+    results_json.save(args, 'bench_soak', 'Continuous strokes (soak)', figures, load_before=load,
+                      seconds=time.perf_counter() - started,
+                      purpose='stroke.count 0, streamed by the actuator to the simulator at 1 kHz, separate '
+                              'processes, for minutes: real-time factor, CPU, memory growth, underruns.')
 
 
 if __name__ == '__main__':

@@ -15,12 +15,14 @@ What it reads from the log (all recorded by default, see docs/logs.md):
 * ``simulator/parameters`` (latched ``rcl_interfaces/ParameterEvent``): the model parameters in force
   and the node's ``step_period`` / ``real_time_factor`` / ``start_paused``.
 * ``simulator/command_receipts`` (``std_msgs/Header``): one per command the simulator received,
-  stamp = sim time of receipt, ``frame_id`` = the command's topic. The i-th receipt naming a topic is
-  paired with the i-th recorded message on that topic (per-publisher order is kept by DDS, so the
-  pairing is exact with one publisher per command topic). A stamp-0 command applies at its receipt
-  time, as does one stamped in the past; a future stamp applies at the stamp (the Stepper decides,
-  exactly as in the node). Without receipts (an older log) the receipt time is estimated as the stamp of
-  the last pose recorded before the command, which is ambiguous by up to a tick.
+  stamp = sim time of receipt, ``frame_id`` = the command's topic, then ``#`` and the command's identity
+  when it has one (the actuator names every trajectory). A receipt with an identity is paired with the
+  recorded message of that identity; one without, with the next recorded message on its topic that has
+  none (per-publisher order is kept by DDS, so the pairing is exact with one such publisher per topic).
+  A stamp-0 command applies at its receipt time, as does one stamped in the past (when it joins the
+  stroke without a jump); a future stamp applies at the stamp (the Stepper decides, exactly as in the
+  node). Without receipts (an older log) the receipt time is estimated as the stamp of the last pose
+  recorded before the command, which is ambiguous by up to a tick.
 * ``particle/pose``: the stop times and the reference trajectory. The simulator stops its integration
   at every published pose; the stamps are rounded to 1 ns, so the exact stop times are rebuilt as
   the simulator computed them, ``t + step_period`` per step (stepped mode, or ``real_time_factor`` 0),
@@ -37,6 +39,7 @@ as ``LogReader.messages(..., decoded=True)`` does.
 from __future__ import annotations
 
 import heapq
+from collections import deque
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from typing import Any, Protocol
@@ -45,8 +48,8 @@ import numpy as np
 
 from ..interface import trajectory_cdr
 from ..interface.cdr import read_pose_xz
-from ..interface.names import joint_names
-from ..interface.stamps import to_ns
+from ..interface.names import joint_names, split_receipt_frame
+from ..interface.stamps import header_frame_id, to_ns
 from ..logs.reader import LogMessage, LogReader
 from ..logs.sim_parameters import recorded_parameters
 from ..physics.dynamics import Observation, SimulationError
@@ -64,6 +67,7 @@ COMMAND_TOPICS = ('actuator/trajectory', 'actuator/command')
 MAX_INTERMEDIATE_STEPS = 1_000_000  # unrecorded steps rebuilt between two recorded poses, at most
 MAX_ADVANCE = 0.5  # s of sim time per Stepper.advance call across a gap with no known stop (Ctrl-C stays quick)
 PROGRESS_EVERY = 256  # recorded poses between two progress calls
+PAIRING_WINDOW_NS = 10_000_000_000  # a receipt is paired with a command logged at most this far from it (ns)
 
 
 class ReplayError(ValueError):
@@ -318,30 +322,30 @@ class LogRecording:
                 self._counts['recorded'] = self._counts.get('recorded', 0) + 1
                 yield m
 
-    def _receipts(self) -> Iterator[tuple[int, str]]:
-        for m in self.log.messages(['simulator/command_receipts'], decoded=True):
-            yield m.stamp_ns, m.message.frame_id
-
     def _paired(self) -> Iterator[Command]:
-        """The i-th receipt naming a topic with the i-th recorded message of that topic."""
+        """Each receipt paired with the recorded command it names: by identity (a trajectory's
+        ``header.frame_id``) when it has one, else the next unnamed recorded message of its topic. A recorded
+        command is looked for among those logged within :data:`PAIRING_WINDOW_NS` of its receipt, so that
+        memory stays bounded whatever the log's length."""
         counts = self._counts
-        queues = {topic: self._recorded(topic) for topic in COMMAND_TOPICS}
-        receipts = self._receipts()
+        pending = {topic: _Pending(self._recorded(topic)) for topic in COMMAND_TOPICS}
         last = None
-        for ns, topic in receipts:
+        for r in self.log.messages(['simulator/command_receipts'], decoded=True):
+            ns = r.stamp_ns
             if last is not None and ns < last:        # a reset: the receipts of the next run are not paired
                 counts['reset'] = 1
                 break
             last = ns
-            m = next(queues[topic], None) if topic in queues else None
+            topic, command_id = split_receipt_frame(r.message.frame_id)
+            queue = pending.get(topic)
+            m = queue.take(command_id, r.log_time_ns) if queue is not None else None
             if m is None:
                 counts['missing'] = counts.get('missing', 0) + 1
             else:
                 counts['paired'] = counts.get('paired', 0) + 1
                 yield Command(ns, topic, m)
-        for queue in queues.values():                 # counted: recorded commands without a receipt
-            for _ in queue:
-                pass
+        for queue in pending.values():               # counted: recorded commands without a receipt
+            queue.drain()
 
     def _estimated(self) -> Iterator[Command]:
         """A log without receipts: each command at the stamp of the last pose logged at or before it, in log
@@ -367,6 +371,56 @@ class LogRecording:
     def _tagged(self, topic: str) -> Iterator[tuple[str, LogMessage]]:
         for m in self._recorded(topic):
             yield topic, m
+
+
+class _Pending:
+    """The recorded messages of one command topic near the receipt being paired: read ahead up to
+    :data:`PAIRING_WINDOW_NS` of log time past it, forgotten that long behind it (never paired, they count
+    as recorded without a receipt)."""
+
+    def __init__(self, recorded: Iterator[LogMessage]):
+        self._recorded = recorded
+        self._next: LogMessage | None = next(recorded, None)
+        self._named: dict[str, deque[LogMessage]] = {}
+        self._unnamed: deque[LogMessage] = deque()
+        self._order: deque[tuple[int, str]] = deque()   # (log time, identity) of the named ones, as read
+
+    def take(self, command_id: str, receipt_log_ns: int) -> LogMessage | None:
+        """The recorded message named ``command_id`` (the next unnamed one for ''), or None."""
+        while self._next is not None and self._next.log_time_ns <= receipt_log_ns + PAIRING_WINDOW_NS:
+            m, self._next = self._next, next(self._recorded, None)
+            name = _command_id(m)
+            if name:
+                self._named.setdefault(name, deque()).append(m)
+                self._order.append((m.log_time_ns, name))
+            else:
+                self._unnamed.append(m)
+        while self._order and self._order[0][0] < receipt_log_ns - PAIRING_WINDOW_NS:
+            _, name = self._order.popleft()
+            if self._named.get(name):
+                self._named[name].popleft()
+                if not self._named[name]:
+                    del self._named[name]
+        if not command_id:
+            return self._unnamed.popleft() if self._unnamed else None
+        same = self._named.get(command_id)
+        if not same:
+            return None
+        m = same.popleft()
+        if not same:
+            del self._named[command_id]
+        return m
+
+    def drain(self) -> None:
+        """Read the rest (the reader counts what it reads)."""
+        for _ in self._recorded:
+            pass
+
+
+def _command_id(m: LogMessage) -> str:
+    """A recorded command's identity: a trajectory's ``header.frame_id`` ('' for set-points and unnamed),
+    read from its bytes."""
+    return header_frame_id(m.data) if m.topic.endswith('actuator/trajectory') else ''
 
 
 def open_recording(log: LogReader) -> LogRecording:
