@@ -1,5 +1,6 @@
 """A stream follows sim time wherever it goes (issue 30): after a reset (sim time back to 0, as a new simulator
-also shows it), a new simulator whose sim time is already past the old one's, or a stall of the sender (sim time ran past the strokes scheduled), the stream re-phases
+also shows it), a new simulator whose sim time is already past the old one's, or a stall of the sender (sim
+time ran past the strokes scheduled), the stream re-phases
 ``stream.lead`` ahead of sim time, ramping from the strokes the simulator holds; it never replays stale
 windows, never joins mid-stroke with a jump, and the part never moves faster than the same strokes move it
 without the fault.
@@ -50,8 +51,9 @@ def _run(scenario: str, fault: str) -> Run:
     elapsed = 0.0                                       # sim time lived through, across the reset
     while elapsed < DURATION:
         stalled = fault == 'stall' and FAULT_AT <= stepper.t < FAULT_AT + FAULT_FOR
+        stepper_now = stepper
         if not stalled:
-            windows, why = stream.follow(stepper.t, LEAD, lambda: stepper.observe().strokes,
+            windows, why = stream.follow(stepper.t, LEAD, stepper_now.observe().strokes.copy,
                                          new_simulator=new_simulator)
             new_simulator = False
             if why is not None:
