@@ -8,7 +8,10 @@ discovered, so adding a command means adding a module.
 from __future__ import annotations
 
 import argparse
+import atexit
+import contextlib
 import importlib
+import os
 import pkgutil
 import sys
 import warnings
@@ -55,7 +58,8 @@ _default_show_warning = warnings.showwarning
 
 def main(argv: list[str] | None = None) -> int:
     """Run one command. A user mistake (bad option, parameter, path or file) is one line on stderr and exit
-    status 2; Ctrl-C is ``interrupted`` and status 130, never a traceback."""
+    status 2; Ctrl-C is ``interrupted`` and status 130, never a traceback. Called as the program (no
+    ``argv``), Ctrl-C ends the process at once (:func:`exit_interrupted`)."""
     command = 'micro-feeder'
     try:
         warnings.showwarning = _show_warning
@@ -66,6 +70,8 @@ def main(argv: list[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
         print(f'{command}: interrupted', file=sys.stderr)
+        if argv is None:
+            exit_interrupted(130)
         return 130
     except Exception as err:  # user mistakes are classified here, once, for every command
         reason = user_error(err)
@@ -73,6 +79,18 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f'{command}: error: {reason}', file=sys.stderr)
         return 2
+
+
+def exit_interrupted(status: int) -> None:
+    """End the program now, after Ctrl-C: the exit handlers run (child processes are stopped, logging is
+    flushed) and the output is flushed, but the interpreter's teardown of every module is skipped: 0.25 s
+    with numba loaded on an idle machine, up to 0.6 s on a loaded one, which made Ctrl-C late. Whatever the
+    command holds open was closed when the interrupt unwound it."""
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+    os._exit(status)
 
 
 def user_error(err: Exception) -> str | None:

@@ -8,16 +8,22 @@ import sys
 from pathlib import Path
 
 from ..logs.reader import LogFormatError, LogReader
+from ..progress import Progress
 from . import CommandError
 
 
-def open_log(path: str) -> LogReader:
+def open_log(path: str, command: str = '') -> LogReader:
     """The log at ``path`` (directory or ``.mcap``); CommandError when it is not a log or nothing in it is
-    readable."""
+    readable. With ``command`` (its name), a progress line goes to stderr while the opening reads a long
+    log through (its CRC check, or the scan of a file without summary)."""
+    progress = Progress(f'{command}: opening the log', 0, 'MiB') if command else None
     try:
-        log = LogReader(Path(path))
+        log = LogReader(Path(path), None if progress is None else lambda done, total: progress(done >> 20, total >> 20))
     except (OSError, LogFormatError) as err:
         raise CommandError(str(err)) from None
+    finally:
+        if progress is not None:
+            progress.close()
     if not log.message_count and log.damage:
         raise CommandError(f'nothing readable in {path}: {log.damage_report()}')
     return log

@@ -22,7 +22,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    log = open_log(args.log)
+    log = open_log(args.log, 'export')
     progress = Progress('export', 0, 'messages')
     try:
         paths = export_csv(log, args.csv, args.topics, progress=progress)

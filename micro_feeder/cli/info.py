@@ -6,6 +6,7 @@ import argparse
 
 from ..logs.coverage import coverage
 from ..logs.summary import format_summary, summarize
+from ..progress import Progress
 from ._logs import open_log, report_loss
 
 
@@ -21,8 +22,21 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    log = open_log(args.log)
-    summary = summarize(log)
+    log = open_log(args.log, 'info')
+    # a log without the recorder's counters in its summary is read through for its last recorder diagnostics
+    total = log.chunk_bytes(['/diagnostics'])
+    progress, read = Progress('info: reading the log', total >> 20, 'MiB'), 0
+
+    def on_read(size: int) -> None:
+        nonlocal read
+        read += size
+        progress(min(read, total) >> 20)
+
+    log.on_read = on_read
+    try:
+        summary = summarize(log)
+    finally:
+        progress.close()
     print(format_summary(summary, coverage(log, summary.recorder, summary.part.stamp)))
     report_loss(log)
     return 0

@@ -25,7 +25,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     from ..plots.log import plot_log  # matplotlib only when plotting
 
-    log = open_log(args.log)
+    log = open_log(args.log, 'plot')
     try:
         path = plot_log(log, args.output, start=args.start, end=args.end)
     except OSError as err:

@@ -75,7 +75,7 @@ def run(args: argparse.Namespace) -> int:
                                'the feed controller\'s feed.* settings do not apply)')
     # A parameters file may also hold other nodes' settings (config/feeder.yaml: feed.*): only the model's apply.
     overrides = {name: value for name, value in overrides.items() if name in model}
-    log = open_log(args.log)
+    log = open_log(args.log, 'resim')
     progress = Progress('resim', 0, 'stops')
     try:
         report = resimulate(log, overrides, progress=progress, max_sim_time=None if args.force else MAX_SIM_TIME)

@@ -1,8 +1,10 @@
-"""The few XCDR1 (little endian) writing rules the hand-serialized messages share.
+"""The few XCDR1 (little endian) rules the hand-serialized messages share, writing and reading.
 
 Fields are aligned to their size relative to the payload start, which is right after the 4-byte
 encapsulation header; a string is a uint32 length that counts its terminating NUL, then its UTF-8 bytes
-and the NUL.
+and the NUL. The readers serve the log tools, which read millions of recorded messages: they return None
+for anything but the plain layout (big endian, cut short, unexpected trailing bytes), and the caller then
+decodes the message in full.
 """
 
 from __future__ import annotations
@@ -29,3 +31,37 @@ def put_string(buf: bytearray, text: str) -> None:
     data = text.encode() + b'\0'
     put_uint32(buf, len(data))
     buf += data
+
+
+POSITION = struct.Struct('<3d')            # a geometry_msgs Point
+
+
+def get_string(body: bytes | memoryview, p: int) -> tuple[str, int]:
+    """The CDR string at ``p`` of a payload (aligned first) and the offset after it; raises ValueError
+    (struct.error, UnicodeDecodeError) when the bytes do not hold one."""
+    p += -p % 4
+    (length,) = struct.unpack_from('<I', body, p)
+    end = p + 4 + length
+    if not length or end > len(body) or body[end - 1] != 0:
+        raise ValueError('not a CDR string')
+    return bytes(body[p + 4:end - 1]).decode(), end
+
+
+def plain_end(body: bytes | memoryview, p: int) -> bool:
+    """True when a payload's fields end at ``p``: at most the 7 bytes of padding a serializer may add."""
+    return 0 <= len(body) - p < 8
+
+
+def read_pose_xz(data: bytes) -> tuple[float, float] | None:
+    """``pose.position`` x and z [m] of a serialized ``geometry_msgs/PoseStamped`` (little-endian CDR), or
+    None when the bytes do not have its plain layout."""
+    if len(data) < 16 or data[:2] != ENCAPSULATION[:2]:
+        return None
+    body = memoryview(data)[4:]
+    try:
+        _, p = get_string(body, STAMP.size)     # header: stamp, frame_id
+        p += -p % 8
+        x, _, z = POSITION.unpack_from(body, p)
+    except (ValueError, struct.error):
+        return None
+    return (x, z) if plain_end(body, p + 7 * 8) else None

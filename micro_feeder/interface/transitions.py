@@ -12,10 +12,12 @@ and letting ``publish`` serialize it cost ~60 µs, the largest share of the simu
 
 from __future__ import annotations
 
+import struct
+
 from diagnostic_msgs.msg import DiagnosticStatus
 
 from ..physics.dynamics import Event
-from .cdr import ENCAPSULATION, STAMP, put_string, put_uint32
+from .cdr import ENCAPSULATION, STAMP, get_string, plain_end, put_string, put_uint32
 from .names import FEEDER_FRAME
 from .stamps import stamp_parts
 
@@ -60,3 +62,40 @@ class TransitionEncoder:
             put_string(payload, value)
         put_string(payload, 't_s')
         return bytes(payload[STAMP.size:])
+
+
+def status_messages(data: bytes) -> list[str] | None:
+    """The ``message`` of each status of a serialized ``diagnostic_msgs/DiagnosticArray`` (little-endian CDR):
+    a transition's kind, read from the bytes (a log holds two a stroke); None when they do not have the
+    plain layout."""
+    if len(data) < 16 or data[:2] != ENCAPSULATION[:2]:
+        return None
+    body = memoryview(data)[4:]
+    unpack = struct.unpack_from
+    out = []
+    try:
+        _, p = get_string(body, STAMP.size)                 # header: stamp, frame_id
+        p += -p % 4
+        (count,) = unpack('<I', body, p)
+        p += 4
+        if count > len(body):
+            return None
+        for _ in range(count):
+            p += 1                                          # level: one byte
+            p += -p % 4                                     # name
+            p += 4 + unpack('<I', body, p)[0]
+            message, p = get_string(body, p)
+            p += -p % 4                                     # hardware_id
+            p += 4 + unpack('<I', body, p)[0]
+            p += -p % 4
+            (values,) = unpack('<I', body, p)
+            p += 4
+            if values > len(body):
+                return None
+            for _ in range(2 * values):                     # key, value
+                p += -p % 4
+                p += 4 + unpack('<I', body, p)[0]
+            out.append(message)
+    except (ValueError, struct.error):
+        return None
+    return out if plain_end(body, p) else None

@@ -1,15 +1,20 @@
 """CSV export: one file per topic, one row per message, one column per scalar field.
 
 Nested fields are flattened with dots (``pose.position.x``), sequences with indices
-(``position.0``); the columns of a topic are the union over its messages (two passes over the log), so
-variable-length arrays fit. The first columns are ``log_time_ns`` (receive time) and ``stamp_ns`` (the
-``header.stamp`` of stamped types, empty for others; not the MCAP publish time, which recorders fill
-differently). Messages that do not decode are skipped and reported by the reader.
+(``position.0``); the columns of a topic are the union over its messages, in the order they first
+appear, so variable-length arrays fit. The first columns are ``log_time_ns`` (receive time) and
+``stamp_ns`` (the ``header.stamp`` of stamped types, empty for others; not the MCAP publish time, which
+recorders fill differently). Messages that do not decode are skipped and reported by the reader.
+
+One pass over the log, in bounded memory: each row is written at once to a spool file next to its CSV
+with the columns known so far (a prefix of the final ones); at the end each CSV is its header then its
+spool, rows widened to the final columns where a topic gained columns after its first row.
 """
 
 from __future__ import annotations
 
 import csv
+import shutil
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -40,36 +45,56 @@ def file_name(topic: str) -> str:
     return topic.strip('/').replace('/', '__') + '.csv'
 
 
+SPOOL_SUFFIX = '.part'
+
+
 def export_csv(log: LogReader, directory: Path | str, topics: list[str] | None = None, *,
                progress: Callable[[int, int], None] | None = None) -> list[Path]:
     """Write one CSV per topic into ``directory``; returns the files written. ``progress(done, total)``
-    is called every 1000 messages (two passes over the log)."""
+    is called every 1000 messages."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
     names = list(log.topics) if topics is None else [r for r in map(log.resolve, topics) if r]
-    columns: dict[str, dict[str, None]] = {name: {} for name in names}
-    total = 2 * sum(log.topics[name].count for name in names)
+    paths = {name: directory / file_name(name) for name in names}
+    spools = {name: path.with_name(path.name + SPOOL_SUFFIX) for name, path in paths.items()}
+    columns: dict[str, dict[str, None]] = {name: {'log_time_ns': None, 'stamp_ns': None} for name in names}
+    first_width: dict[str, int] = {}     # columns when a topic's first row was written
+    total = sum(log.topics[name].count for name in names)
     done = 0
-    for m in log.messages(names, decoded=True):
-        columns[m.topic].update(dict.fromkeys(flatten(m.message)))
-        done += 1
-        if progress is not None and not done % 1000:
-            progress(done, total)
-    written = []
-    files = {name: open(directory / file_name(name), 'w', newline='') for name in names}  # noqa: SIM115
+    streams = {}
     try:
-        writers = {}
-        for name, stream in files.items():
-            writers[name] = csv.DictWriter(stream, ['log_time_ns', 'stamp_ns', *columns[name]])
-            writers[name].writeheader()
-            written.append(Path(stream.name))
+        streams = {name: open(spool, 'w', newline='') for name, spool in spools.items()}  # noqa: SIM115
+        writers = {name: csv.writer(stream) for name, stream in streams.items()}
         for m in log.messages(names, decoded=True):
-            writers[m.topic].writerow({'log_time_ns': m.log_time_ns, 'stamp_ns': m.stamp_ns,
-                                       **flatten(m.message)})
+            row = {'log_time_ns': m.log_time_ns, 'stamp_ns': m.stamp_ns, **flatten(m.message)}
+            known = columns[m.topic]
+            known.update(dict.fromkeys(row))
+            first_width.setdefault(m.topic, len(known))
+            writers[m.topic].writerow([row.get(column, '') for column in known])
             done += 1
             if progress is not None and not done % 1000:
                 progress(done, total)
-    finally:
-        for stream in files.values():
+        for stream in streams.values():
             stream.close()
-    return written
+        for name in names:
+            _finish(paths[name], spools[name], list(columns[name]), first_width.get(name, 2))
+    finally:
+        for stream in streams.values():
+            stream.close()
+        for spool in spools.values():
+            spool.unlink(missing_ok=True)
+    return [paths[name] for name in names]
+
+
+def _finish(path: Path, spool: Path, columns: list[str], first_width: int) -> None:
+    """The CSV: the header, then the spooled rows (widened with empty fields where the topic gained
+    columns after its first row)."""
+    with open(path, 'w', newline='') as out:
+        csv.writer(out).writerow(columns)
+        with open(spool, newline='') as rows:
+            if first_width == len(columns):      # no column added after the first row: every row is whole
+                shutil.copyfileobj(rows, out)
+                return
+            writer = csv.writer(out)
+            for row in csv.reader(rows):
+                writer.writerow(row + [''] * (len(columns) - len(row)))

@@ -16,11 +16,15 @@ outside the messages.
 
 from __future__ import annotations
 
+import array
+import contextlib
 import heapq
 import io
+import itertools
 import mmap
 import struct
 import zlib
+from collections import OrderedDict
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -35,6 +39,9 @@ HEAD = 9                    # opcode (1 byte) + record length (8 bytes)
 FOOTER_LENGTH = 20          # summary start, summary offset start, summary CRC
 MAX_CHUNK_BYTES = 1 << 30   # a declared uncompressed chunk size above this is damage, not data
 KNOWN_OPCODES = frozenset(int(op) for op in Opcode)
+RELEASE_BYTES = 1 << 22    # bytes read through a file's map between two unmappings of its pages
+CHUNK_CACHE = 4            # uncompressed chunks kept (a replay reads ~4 topics side by side, each chunk once)
+MESSAGE_HEAD = struct.Struct('<HIQQ')   # a message record's channel id, sequence, log time, publish time
 # Parsing a damaged record can raise almost anything (struct, UTF-8, zstd, short reads, MemoryError).
 PARSE_ERRORS = (Exception,)
 
@@ -84,12 +91,17 @@ class McapFile:
     ``schemas``/``channels`` by id; ``chunks`` (file order); ``counts`` per channel id of readable
     messages (from the statistics of an intact file); ``start_ns``/``end_ns``; ``metadata`` records;
     ``complete`` (a summary was read); ``truncated`` (the file ends inside a record); ``damage``.
-    ``on_damage`` is called once with each new :class:`Damage`.
+    ``on_damage`` is called once with each new :class:`Damage`; ``progress(bytes)`` with how far the
+    opening's pass over the file got (the CRC check of a complete file, the scan of one without summary);
+    ``on_read(bytes)`` with the size of each chunk read afterwards.
     """
 
-    def __init__(self, path: Path, on_damage: Callable[[Damage], None] | None = None) -> None:
+    def __init__(self, path: Path, on_damage: Callable[[Damage], None] | None = None,
+                 progress: Callable[[int], None] | None = None, on_read: Callable[[int], None] | None = None) -> None:
         self.path = path
         self.on_damage = on_damage
+        self.on_read = on_read
+        self._progress = progress
         self.schemas: dict[int, Schema] = {}
         self.channels: dict[int, Channel] = {}
         self.chunks: list[ChunkRef] = []
@@ -103,6 +115,8 @@ class McapFile:
         self.damage: list[Damage] = []
         self._damaged_offsets: set[int] = set()
         self._reported: set[object] = set()
+        self._unreleased = 0   # bytes read through the map since its pages were last unmapped
+        self._chunk_cache: OrderedDict[int, tuple[bytes, dict[int | None, array.array]]] = OrderedDict()
         with open(path, 'rb') as f:
             self.size = f.seek(0, io.SEEK_END)
             f.seek(0)
@@ -115,6 +129,7 @@ class McapFile:
             return
         if not self._open_summary():
             self._scan()
+        self._progress = None
 
     # -- reading ------------------------------------------------------------------------------------
     def messages(self, channel_ids: set[int] | None = None, start_ns: int | None = None,
@@ -143,9 +158,8 @@ class McapFile:
                         end_ns: int | None, reverse: bool) -> Iterator[Message]:
         lists = []
         for ref in group:
-            msgs = [m for m in self.read_chunk(ref)
-                    if (channel_ids is None or m.channel_id in channel_ids)
-                    and (start_ns is None or m.log_time >= start_ns) and (end_ns is None or m.log_time < end_ns)]
+            msgs = [m for m in self.read_chunk(ref, channel_ids)
+                    if (start_ns is None or m.log_time >= start_ns) and (end_ns is None or m.log_time < end_ns)]
             msgs.sort(key=lambda m: m.log_time, reverse=reverse)
             lists.append(msgs)
         if len(lists) == 1:
@@ -153,19 +167,20 @@ class McapFile:
         else:
             yield from heapq.merge(*lists, key=lambda m: m.log_time, reverse=reverse)
 
-    def read_chunk(self, ref: ChunkRef) -> list[Message]:
-        """The messages of one chunk, or [] (and one :class:`Damage`) when it is damaged."""
+    def read_chunk(self, ref: ChunkRef, channel_ids: set[int] | None = None) -> list[Message]:
+        """The messages of one chunk (of ``channel_ids`` only, when given), or [] (and one :class:`Damage`)
+        when it is damaged."""
         if ref.loose is not None:
-            return ref.loose
+            return [m for m in ref.loose if channel_ids is None or m.channel_id in channel_ids]
         if ref.offset in self._damaged_offsets:
             return []
         try:
-            records = self._chunk_records(ref.offset)
+            records = self._chunk_records(ref.offset, channel_ids)
         except PARSE_ERRORS as err:
             self.report(ref.offset, f'damaged chunk ({_reason(err)}), log time {ref.start_ns * 1e-9:.3f}–'
                                      f'{ref.end_ns * 1e-9:.3f} s: skipped', self._indexed_count(ref))
             return []
-        return [r for r in records if isinstance(r, Message)]
+        return records
 
     # -- opening --------------------------------------------------------------------------------------
     def _open_summary(self) -> bool:
@@ -263,6 +278,9 @@ class McapFile:
                 pos = following
                 continue
             self._scan_record(pos, op, length)
+            self._read(HEAD + length)
+            if self._progress is not None and op == Opcode.CHUNK:
+                self._progress(end)
             pos = end
             self.readable_bytes = pos
         self.truncated = True   # no DataEnd: the writer did not finish
@@ -281,11 +299,27 @@ class McapFile:
                                         'file instead', 0)
 
     def _crc(self, end: int) -> int:
-        """CRC-32 of the file's first ``end`` bytes, in 16 MiB slices."""
+        """CRC-32 of the file's first ``end`` bytes, in slices of :data:`RELEASE_BYTES`."""
         crc = 0
-        for lo in range(0, end, 1 << 24):
-            crc = zlib.crc32(self._map[lo:min(end, lo + (1 << 24))], crc)
+        for lo in range(0, end, RELEASE_BYTES):
+            hi = min(end, lo + RELEASE_BYTES)
+            with memoryview(self._map) as view:      # no copy of the slice
+                crc = zlib.crc32(view[lo:hi], crc)
+            self._read(hi - lo)
+            if self._progress is not None:
+                self._progress(hi)
         return crc
+
+    def _read(self, n: int) -> None:
+        """Count ``n`` bytes read through the map; every :data:`RELEASE_BYTES`, unmap the pages read so far
+        from this process (they stay in the page cache, and a later read maps them again): a pass over a
+        long log would otherwise count the whole file, and the pages the kernel maps around those read, in
+        the process's resident memory."""
+        self._unreleased += n
+        if self._unreleased >= RELEASE_BYTES and self.size:
+            self._unreleased = 0
+            with contextlib.suppress(AttributeError, OSError, ValueError):   # no madvise here: pages stay mapped
+                self._map.madvise(mmap.MADV_DONTNEED)
 
     def _scan_record(self, pos: int, op: int, length: int) -> None:
         body = self._map[pos + HEAD:pos + HEAD + length]
@@ -375,13 +409,49 @@ class McapFile:
                 if record is not None:
                     yield record
             pos += HEAD + length
+            self._read(HEAD + length)
 
-    def _chunk_records(self, pos: int) -> list:
-        """Decompress, CRC-check and parse the chunk record at ``pos``; raises on any damage."""
+    def _chunk_records(self, pos: int, channel_ids: set[int] | None = None) -> list[Message]:
+        """The messages (of ``channel_ids`` only, when given) of the chunk record at ``pos``, in record order;
+        raises on any damage of the chunk (:meth:`_chunk`)."""
+        raw, offsets = self._chunk(pos)
+        if channel_ids is None:
+            at = offsets[None]
+        else:
+            lists = [offsets[c] for c in channel_ids if c in offsets]
+            at = lists[0] if len(lists) == 1 else sorted(itertools.chain.from_iterable(lists))
+        out = []
+        for inner in at:
+            (rlen,) = struct.unpack_from('<Q', raw, inner + 1)
+            channel_id, sequence, log_time, publish_time = MESSAGE_HEAD.unpack_from(raw, inner + HEAD)
+            out.append(Message(channel_id=channel_id, log_time=log_time,
+                               data=raw[inner + HEAD + MESSAGE_HEAD.size:inner + HEAD + rlen],
+                               publish_time=publish_time, sequence=sequence))
+        return out
+
+    def _chunk(self, pos: int) -> tuple[bytes, dict[int | None, array.array]]:
+        """The uncompressed chunk at ``pos`` and where its message records start (per channel id, and all
+        under None), from a cache of the last :data:`CHUNK_CACHE` chunks read: the readers of several
+        topics that a replay runs side by side read each chunk once."""
+        cached = self._chunk_cache.get(pos)
+        if cached is None:
+            cached = self._chunk_cache[pos] = self._read_chunk_record(pos)
+            if self.on_read is not None:
+                self.on_read(HEAD + struct.unpack_from('<Q', self._map, pos + 1)[0])
+            while len(self._chunk_cache) > CHUNK_CACHE:
+                self._chunk_cache.popitem(last=False)
+        else:
+            self._chunk_cache.move_to_end(pos)
+        return cached
+
+    def _read_chunk_record(self, pos: int) -> tuple[bytes, dict[int | None, array.array]]:
+        """Decompress, CRC-check and walk the chunk record at ``pos`` (its schema, channel and metadata
+        records registered); raises on any damage."""
         op, length = struct.unpack_from('<BQ', self._map, pos)
         if op != Opcode.CHUNK or pos + HEAD + length > self.size:
             raise ValueError('no chunk record at its indexed offset')
         body = self._map[pos + HEAD:pos + HEAD + length]
+        self._read(HEAD + length)
         if length < 40:
             raise ValueError('chunk record too short')
         size, crc, clen = struct.unpack_from('<QII', body, 16)
@@ -405,18 +475,28 @@ class McapFile:
             raise ValueError(f'decompressed to {len(raw)} bytes, header says {size}')
         if crc and zlib.crc32(raw) != crc:
             raise ValueError('CRC mismatch')
-        records = []
+        offsets: dict[int | None, array.array] = {None: array.array('Q')}
+        every = offsets[None]
         inner = 0
         while inner < len(raw):
             op, rlen = struct.unpack_from('<BQ', raw, inner)
             if inner + HEAD + rlen > len(raw):
                 raise ValueError('record runs past the chunk')
-            record = _parse(op, memoryview(raw)[inner + HEAD:inner + HEAD + rlen], rlen)
-            if record is not None:
-                self._register(record)
-                records.append(record)
+            if op == Opcode.MESSAGE:      # the bulk of a log: only located here, read by _chunk_records
+                if rlen < MESSAGE_HEAD.size:
+                    raise ValueError('message record too short')
+                (channel_id,) = struct.unpack_from('<H', raw, inner + HEAD)
+                channel = offsets.get(channel_id)
+                if channel is None:
+                    channel = offsets[channel_id] = array.array('Q')
+                channel.append(inner)
+                every.append(inner)
+            else:
+                record = _parse(op, memoryview(raw)[inner + HEAD:inner + HEAD + rlen], rlen)
+                if record is not None:
+                    self._register(record)
             inner += HEAD + rlen
-        return records
+        return raw, offsets
 
     def _indexed_count(self, ref: ChunkRef) -> int | None:
         """How many messages a chunk held, from its message index records (None when unreadable)."""

@@ -124,15 +124,20 @@ class LogReader:
     ``damage`` found so far and ``lost`` messages, the recorder's ``recorder_info`` (loss counters ...),
     and :meth:`messages`."""
 
-    def __init__(self, path: Path | str) -> None:
+    def __init__(self, path: Path | str, progress: Callable[[int, int], None] | None = None) -> None:
+        """Open the log at ``path``; ``progress(bytes, total bytes)`` is called as the opening reads the files
+        through (their CRC check, or the scan of a file without summary: seconds for an hour at 1 kHz).
+        Afterwards, :attr:`on_read` (when set) is called with the compressed size of each chunk read."""
         self.path = Path(path)
+        self.on_read: Callable[[int], None] | None = None
         self.damage: list[Damage] = []
         self.undecodable: dict[str, int] = {}
         self.files = self._find_files()
         self._decoders: dict[int, Callable[[bytes], Any]] = {}
         self._stamped: dict[int, bool] = {}
         try:
-            self._mcaps = [McapFile(p, self._on_damage) for p in self.files]
+            self._mcaps = [McapFile(p, self._on_damage, self._file_progress(i, progress), self._chunk_read)
+                           for i, p in enumerate(self.files)]
         except NotMcapError as err:
             raise LogFormatError(str(err)) from None
         self.truncated = [f.path for f in self._mcaps if f.truncated]
@@ -164,6 +169,16 @@ class LogReader:
         """Span of the log times [s]."""
         return (self.end_ns - self.start_ns) * 1e-9
 
+    def chunk_bytes(self, topics: Iterable[str] | None = None) -> int:
+        """Bytes of the chunks that hold messages of ``topics`` (all when None): what a pass over their
+        messages reads (:attr:`on_read` counts up to it)."""
+        wanted = None if topics is None else {r for r in map(self.resolve, topics) if r}
+        total = 0
+        for f in self._mcaps:
+            ids = None if wanted is None else {cid for cid, c in f.channels.items() if c.topic in wanted}
+            total += sum(c.length for c in f.chunks if ids is None or c.channels is None or c.channels & ids)
+        return total
+
     @property
     def message_count(self) -> int:
         return sum(t.count for t in self.topics.values())
@@ -194,18 +209,19 @@ class LogReader:
         return matches[0] if matches else None
 
     def messages(self, topics: Iterable[str] | None = None, *, start_ns: int | None = None,
-                 end_ns: int | None = None, decoded: bool = False) -> Iterator[LogMessage]:
+                 end_ns: int | None = None, decoded: bool = False, reverse: bool = False) -> Iterator[LogMessage]:
         """Readable messages of the given topics (all when None; relative names resolved), log time in
-        ``[start_ns, end_ns)``, in log-time order within each file and files in order. With
-        ``decoded``, each is decoded first and one that does not decode is skipped and counted."""
+        ``[start_ns, end_ns)``, in log-time order within each file and files in order (``reverse``: from
+        the end). With ``decoded``, each is decoded first and one that does not decode is skipped and
+        counted."""
         wanted = None if topics is None else {r for r in map(self.resolve, topics) if r}
         if wanted is not None and not wanted:
             return
-        for f in self._mcaps:
+        for f in (reversed(self._mcaps) if reverse else self._mcaps):
             ids = None if wanted is None else {cid for cid, c in f.channels.items() if c.topic in wanted}
             if ids is not None and not ids:
                 continue
-            for msg in f.messages(ids, start_ns, end_ns):
+            for msg in f.messages(ids, start_ns, end_ns, reverse=reverse):
                 m = self._message(f, msg)
                 if m is not None and (not decoded or self._decodes(m)):
                     yield m
@@ -219,9 +235,21 @@ class LogReader:
         return self._edge(topic, last=True)
 
     # -- internals ----------------------------------------------------------------------------------
+    def _chunk_read(self, size: int) -> None:
+        if self.on_read is not None:
+            self.on_read(size)
+
     def _on_damage(self, damage: Damage) -> None:
         self.damage.append(damage)
         warnings.warn(str(damage), DamagedLogWarning, stacklevel=3)
+
+    def _file_progress(self, i: int, progress: Callable[[int, int], None] | None) -> Callable[[int], None] | None:
+        """``progress`` over all files, for the i-th one's pass."""
+        if progress is None:
+            return None
+        sizes = [p.stat().st_size for p in self.files]
+        before, total = sum(sizes[:i]), sum(sizes)
+        return lambda pos: progress(before + pos, total)
 
     def _find_files(self) -> list[Path]:
         if self.path.is_file():
@@ -261,6 +289,12 @@ class LogReader:
                 if m is not None and self._decodes(m):
                     return m
         return None
+
+    def decodes(self, m: LogMessage) -> bool:
+        """Decode ``m`` (once) and say whether it decodes; one that does not is counted and reported as
+        ``messages(..., decoded=True)`` does. For readers that take the fields they need from the bytes and
+        decode only a message whose layout they do not read."""
+        return self._decodes(m)
 
     def _decodes(self, m: LogMessage) -> bool:
         try:

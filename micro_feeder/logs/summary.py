@@ -102,12 +102,12 @@ def recorder_counters(log: LogReader) -> tuple[dict[str, str], str]:
     """The recorder's counters and where they came from."""
     if log.recorder_info:
         return dict(log.recorder_info), 'summary'
-    counters: dict[str, str] = {}
-    for m in log.messages(['/diagnostics'], decoded=True):
-        for status in m.message.status:
+    for m in log.messages(['/diagnostics'], decoded=True, reverse=True):   # the last one: read from the end
+        for status in reversed(m.message.status):
             if status.name.startswith(RECORDER_STATUS_PREFIX):
                 counters = {kv.key: kv.value for kv in status.values}
-    return counters, 'diagnostics' if counters else ''
+                return counters, 'diagnostics' if counters else ''
+    return {}, ''
 
 
 def _rate(log: LogReader, topic: str, count: int) -> float | None:

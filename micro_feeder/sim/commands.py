@@ -11,6 +11,7 @@ import logging
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
@@ -118,17 +119,18 @@ def parse_trajectory(msg: JointTrajectory, joints: Sequence[str], limits: tuple[
                     msg.header.frame_id)
 
 
-def parse_trajectory_cdr(data: bytes, joints: Sequence[str], limits: tuple[float, float]) -> TrajectoryCommand:
+def parse_trajectory_cdr(data: bytes, joints: Sequence[str], limits: tuple[float, float],
+                         deserialize: Callable[[bytes], Any] | None = None) -> TrajectoryCommand:
     """:func:`parse_trajectory` of a serialized JointTrajectory, reading the knots of the usual layout
     (positions, velocities and accelerations on every point, as the actuator sends) with numpy instead of
-    deserializing one Python object per point; any other layout is deserialized by rclpy
-    (:mod:`~micro_feeder.interface.wire`). A message of more than :data:`MAX_POINTS` points is refused
-    without reading them. Raises :class:`CommandRejected`
+    deserializing one Python object per point; any other layout is deserialized by ``deserialize`` (the
+    log tools give their decoder), by default rclpy's (:mod:`~micro_feeder.interface.wire`). A message of
+    more than :data:`MAX_POINTS` points is refused without reading them. Raises :class:`CommandRejected`
     (also for bytes that are not a JointTrajectory)."""
     decoded = trajectory_cdr.decode(data, MAX_POINTS)
-    if decoded is None or (decoded.records is None and 0 < decoded.n_points <= MAX_POINTS):
+    if needs_deserializing(decoded):
         try:
-            msg = wire.deserialize(data, JointTrajectory)
+            msg = (deserialize or _wire_trajectory)(data)
         except Exception as err:  # rclpy raises several types for malformed bytes
             raise CommandRejected(f'trajectory: cannot deserialize: {err}') from err
         return parse_trajectory(msg, joints, limits)
@@ -140,6 +142,16 @@ def parse_trajectory_cdr(data: bytes, joints: Sequence[str], limits: tuple[float
         return offsets, records['pos'][:, columns], records['vel'][:, columns], records['acc'][:, columns]
 
     return _checked(decoded.stamp, decoded.names, decoded.n_points, knots, joints, limits, decoded.frame_id)
+
+
+def needs_deserializing(decoded: trajectory_cdr.Decoded | None) -> bool:
+    """True when :func:`parse_trajectory_cdr` deserializes the message (its points are not in the layout
+    :func:`~micro_feeder.interface.trajectory_cdr.decode` reads)."""
+    return decoded is None or (decoded.records is None and 0 < decoded.n_points <= MAX_POINTS)
+
+
+def _wire_trajectory(data: bytes) -> JointTrajectory:
+    return wire.deserialize(data, JointTrajectory)
 
 
 def _checked(stamp: float, names: list[str], n_points: int, knots: Callable[[list[int]], tuple[np.ndarray, ...]],

@@ -1,10 +1,14 @@
 """Replaying a log's commands into a :class:`~.stepper.Stepper`: the one loop ``resim`` and calibration share.
 
-A :class:`Recording` is what a log gives, independent of the model: the model parameters the simulator
-recorded, the simulator's stops (rebuilt from the ``particle/pose`` header stamps, the one rule for pose
-time) with the recorded pose at each, and the commands paired with the sim times the simulator received
-them (``simulator/command_receipts``). :func:`replay` drives a stepper through it exactly as the simulator
+A log gives, independent of the model: the model parameters the simulator recorded, the simulator's stops
+(rebuilt from the ``particle/pose`` header stamps, the one rule for pose time) with the recorded pose at
+each, and the commands paired with the sim times the simulator received them
+(``simulator/command_receipts``). :func:`replay` drives a stepper through them exactly as the simulator
 ran: commands received before a stop, the stop, then the commands received at it.
+
+:class:`LogRecording` streams them from the log in stamp order, so that a replay holds one chunk of the
+log at a time whatever its length (``resim`` of an hour at 1 kHz); :func:`read_recording` reads them into
+a :class:`Recording` once, for calibration, which replays a short log many times.
 
 What it reads from the log (all recorded by default, see docs/logs.md):
 
@@ -25,31 +29,45 @@ What it reads from the log (all recorded by default, see docs/logs.md):
   checked against every stamp. In real time the increments are elapsed wall time × factor, which the
   log only knows to the nanosecond: the replay stops at the rounded times.
 
-Only the run up to the first ``simulator/reset`` is replayed (``Recording.reset`` says when there is more).
+Only the run up to the first ``simulator/reset`` is replayed (``reset`` says when there is more).
+
+Messages are read from their bytes where the layout is the plain one (a pose's x and z, a trajectory's
+knots: what the simulator itself reads), else decoded; one that does not decode is skipped and counted,
+as ``LogReader.messages(..., decoded=True)`` does.
 """
 
 from __future__ import annotations
 
-import bisect
-from collections import defaultdict
-from collections.abc import Callable, Iterator, Mapping
+import heapq
+from collections import deque
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
+from ..interface import trajectory_cdr
+from ..interface.cdr import read_pose_xz
 from ..interface.names import joint_names, split_receipt_frame
-from ..interface.stamps import to_ns
+from ..interface.stamps import header_frame_id, to_ns
 from ..logs.reader import LogMessage, LogReader
 from ..logs.sim_parameters import recorded_parameters
 from ..physics.dynamics import Observation, SimulationError
 from ..settings import model_specs
-from .commands import CommandRejected, parse_setpoints, parse_trajectory
+from .commands import (
+    MAX_POINTS,
+    CommandRejected,
+    needs_deserializing,
+    parse_setpoints,
+    parse_trajectory_cdr,
+)
 from .stepper import Stepper
 
 COMMAND_TOPICS = ('actuator/trajectory', 'actuator/command')
 MAX_INTERMEDIATE_STEPS = 1_000_000  # unrecorded steps rebuilt between two recorded poses, at most
 MAX_ADVANCE = 0.5  # s of sim time per Stepper.advance call across a gap with no known stop (Ctrl-C stays quick)
+PROGRESS_EVERY = 256  # recorded poses between two progress calls
+PAIRING_WINDOW_NS = 10_000_000_000  # a receipt is paired with a command logged at most this far from it (ns)
 
 
 class ReplayError(ValueError):
@@ -68,16 +86,34 @@ class Stop:
 
 @dataclass(frozen=True)
 class Command:
-    """A recorded command and the sim time [ns] the simulator received it at."""
+    """A recorded command (its log message: the bytes, decoded only when needed) and the sim time [ns]
+    the simulator received it at."""
 
     receipt_ns: int
     topic: str
-    message: Any
+    recorded: LogMessage
+
+    @property
+    def message(self) -> Any:
+        """The decoded message."""
+        return self.recorded.message
+
+
+class Replayable(Protocol):
+    """What :func:`replay` drives a stepper through: stops and commands in order, and the count of
+    recorded poses (for progress)."""
+
+    @property
+    def pose_count(self) -> int: ...
+
+    def iter_stops(self) -> Iterator[Stop]: ...
+
+    def iter_commands(self) -> Iterator[Command]: ...
 
 
 @dataclass(frozen=True)
 class Recording:
-    """What a log gives a replay, independent of the model.
+    """What a log gives a replay, independent of the model, read into memory (:func:`read_recording`).
 
     ``flat``: the recorded model parameters (only model parameters; empty when not recorded);
     ``snapshots``: every recorded ``simulator/parameters`` snapshot (node settings too); ``stops``: the
@@ -102,6 +138,10 @@ class Recording:
         return [s for s in self.stops if s.pose is not None]
 
     @property
+    def pose_count(self) -> int:
+        return len(self.posed_stops)
+
+    @property
     def poses(self) -> np.ndarray:
         """(n, 2) recorded (x, z) in m."""
         return np.array([s.pose for s in self.posed_stops])
@@ -111,134 +151,291 @@ class Recording:
         """(n,) sim times of the recorded poses (s)."""
         return np.array([s.t for s in self.posed_stops])
 
+    def iter_stops(self) -> Iterator[Stop]:
+        return iter(self.stops)
 
-def stop_times(poses: list[tuple[int, float, float]], step_periods: list[float]) -> tuple[list[Stop], bool]:
-    """The simulator's stops up to each recorded pose ``(stamp ns, x, z)``, and whether all are exact.
+    def iter_commands(self) -> Iterator[Command]:
+        return iter(self.commands)
+
+
+class StopTimes:
+    """The simulator's stops rebuilt from recorded pose stamps, one pose at a time; ``exact`` stays True
+    while every stop is rebuilt bit for bit.
 
     From t = 0, each recorded stamp is reached by ``n`` additions of a recorded step period (the
     simulator's own ``t + step_period``, so the floats are the simulator's bit for bit) when one fits
     the stamp to the nanosecond; otherwise the stop is the stamp itself (real time: exact only to 1 ns).
     """
-    stops: list[Stop] = []
-    t, exact = 0.0, True
-    for ns, x, z in poses:
-        path = _steps_to(t, ns, step_periods)
-        if path is None:
-            exact = False
-            path = [ns / 1e9]
-        stops += [Stop(s, to_ns(s), None) for s in path[:-1]]
-        stops.append(Stop(path[-1], ns, (x, z)))
-        t = path[-1]
-    return stops, exact
+
+    def __init__(self, step_periods: list[float]):
+        self.step_periods = step_periods
+        self.exact = True
+
+    def stops(self, poses: Iterable[tuple[int, float, float]]) -> Iterator[Stop]:
+        """The stops up to each recorded pose ``(stamp ns, x, z)``, unrecorded steps included."""
+        t = 0.0
+        for ns, x, z in poses:
+            steps = _steps_to(t, ns, self.step_periods)
+            if steps is None:
+                self.exact = False
+                t = ns / 1e9
+            else:
+                dt, n = steps
+                for _ in range(n - 1):
+                    t += dt
+                    yield Stop(t, to_ns(t), None)
+                if n:
+                    t += dt
+            yield Stop(t, ns, (x, z))
 
 
-def _steps_to(t: float, ns: int, step_periods: list[float]) -> list[float] | None:
-    """The times ``t + dt``, ``t + dt + dt`` ... ending exactly at stamp ``ns`` for a ``dt`` of
-    ``step_periods``; ``[t]`` when ``t`` already has that stamp; None when no step period fits."""
+def stop_times(poses: list[tuple[int, float, float]], step_periods: list[float]) -> tuple[list[Stop], bool]:
+    """The simulator's stops up to each recorded pose ``(stamp ns, x, z)``, and whether all are exact
+    (:class:`StopTimes`)."""
+    rebuilt = StopTimes(step_periods)
+    stops = list(rebuilt.stops(poses))
+    return stops, rebuilt.exact
+
+
+def _steps_to(t: float, ns: int, step_periods: list[float]) -> tuple[float, int] | None:
+    """``(dt, n)``: ``n`` additions of ``dt`` (one of ``step_periods``) take ``t`` exactly to stamp ``ns``;
+    ``(0.0, 0)`` when ``t`` already has that stamp; None when no step period fits."""
     if to_ns(t) == ns:
-        return [t]
+        return 0.0, 0
     for dt in step_periods:
         n = round((ns - to_ns(t)) / (dt * 1e9))
         if not 1 <= n <= MAX_INTERMEDIATE_STEPS:
             continue
-        path, s = [], t
+        s = t
         for _ in range(n):
             s += dt
-            path.append(s)
         if to_ns(s) == ns:
-            return path
+            return dt, n
     return None
 
 
-def first_segment(items: list[tuple[int, Any]]) -> tuple[list[tuple[int, Any]], bool]:
-    """``(stamp ns, item)`` up to the first stamp that goes back in time (a reset); and whether there
-    was one."""
-    for i in range(1, len(items)):
-        if items[i][0] < items[i - 1][0]:
-            return items[:i], True
-    return items, False
+class LogRecording:
+    """A log's recording streamed from the log: what :func:`replay` needs, read as it goes (nothing is read
+    ahead, so that a replay answers at once whatever the log's length).
+
+    Known when opened: ``path``, ``flat`` (the recorded model parameters), ``snapshots``, ``receipts``
+    (``'recorded'`` or ``'estimated'``), ``pose_count`` (recorded poses, from the log's statistics) and
+    ``last_ns`` (the stamp of the last one: the end of the replay when the log has no reset). Known once
+    the stops and the commands have been iterated to their ends (as :func:`replay` does): ``exact`` (every
+    stop rebuilt bit for bit), ``reset`` (the log continues after a ``simulator/reset`` that is not
+    replayed), ``first_ns`` (the first pose's stamp) and ``notes``. Each iteration reads the log afresh.
+
+    Raises :class:`ReplayError` when the log has no pose or its parameters cannot be read.
+    """
+
+    def __init__(self, log: LogReader):
+        self.log = log
+        self.path = str(log.path)
+        specs = model_specs()
+        try:
+            self.snapshots = recorded_parameters(log)
+        except ValueError as err:
+            raise ReplayError(f'simulator/parameters unreadable: {err}') from err
+        self.flat = {name: value for name, value in (self.snapshots[0] if self.snapshots else {}).items()
+                     if name in specs}
+        self.step_periods = sorted({float(s['step_period']) for s in self.snapshots if 'step_period' in s}) or [1e-3]
+        last = log.last('particle/pose')
+        if last is None:
+            raise ReplayError('the log has no particle/pose')
+        self.last_ns = last.stamp_ns or 0
+        self.pose_count = log.topics[log.resolve('particle/pose')].count
+        self.first_ns: int | None = None
+        self.reset = False
+        self.receipts = 'recorded' if log.resolve('simulator/command_receipts') is not None else 'estimated'
+        self._stop_times = StopTimes(self.step_periods)
+        self._counts: dict[str, int] = {}   # commands: 'recorded', 'paired', 'missing'; receipts: 'reset'
+
+    @property
+    def exact(self) -> bool:
+        return self._stop_times.exact
+
+    @property
+    def notes(self) -> list[str]:
+        """What the reader should know about the log (complete once stops and commands were iterated)."""
+        notes = []
+        if self.reset:
+            notes.append('the log holds a simulator/reset: only the run before it is replayed')
+        c = self._counts
+        if self.receipts == 'estimated':
+            if c.get('recorded'):
+                notes.append('the log has no simulator/command_receipts (recorded by an older simulator): receipt '
+                             'times estimated from the last pose recorded before each command, ambiguous by a tick')
+        else:
+            if c.get('missing'):
+                notes.append(f'{c["missing"]} commands the simulator received are not in the log (the recorder '
+                             'missed them, e.g. it started after them): replayed without them')
+            unacknowledged = c.get('recorded', 0) - c.get('paired', 0)
+            if unacknowledged and not c.get('reset'):
+                notes.append(f'{unacknowledged} recorded commands have no receipt from the simulator (sent after it '
+                             'stopped, or it missed them): not applied')
+        if self.first_ns:
+            notes.append(f'the first recorded pose is at t = {self.first_ns * 1e-9:.6f} s, not 0 (the recorder '
+                         'joined late): earlier stops unknown, started from t = 0')
+        return notes
+
+    def iter_stops(self) -> Iterator[Stop]:
+        """The simulator's stops with the recorded poses, in stamp order, up to the reset."""
+        self._stop_times = StopTimes(self.step_periods)
+        return self._stop_times.stops(self._first_run())
+
+    def iter_commands(self) -> Iterator[Command]:
+        """The commands in receipt order with their receipt times (the counts behind :attr:`notes` are
+        final when the iterator ends)."""
+        self._counts = {}
+        return self._paired() if self.receipts == 'recorded' else self._estimated()
+
+    # -- reading --------------------------------------------------------------------------------------
+    def _first_run(self) -> Iterator[tuple[int, float, float]]:
+        """The recorded poses up to the first stamp that goes back in time (a reset)."""
+        self.first_ns, self.reset, last = None, False, None
+        for ns, x, z in self._poses():
+            if last is None:
+                self.first_ns = ns
+            elif ns < last:
+                self.reset = True
+                return
+            last = ns
+            yield ns, x, z
+
+    def _poses(self) -> Iterator[tuple[int, float, float]]:
+        """``(stamp ns, x, z)`` of every readable recorded pose, in log order."""
+        for m in self.log.messages(['particle/pose']):
+            xz = read_pose_xz(m.data)
+            if xz is None:
+                if not self.log.decodes(m):
+                    continue
+                p = m.message.pose.position
+                xz = p.x, p.z
+            yield m.stamp_ns or 0, xz[0], xz[1]
+
+    def _recorded(self, topic: str) -> Iterator[LogMessage]:
+        """The readable messages of a command topic, in log order (a trajectory's knots are read from its
+        bytes when they have the actuator's layout; anything else must decode)."""
+        for m in self.log.messages([topic]):
+            fast = topic == 'actuator/trajectory' and not needs_deserializing(trajectory_cdr.decode(m.data, MAX_POINTS))
+            if fast or self.log.decodes(m):
+                self._counts['recorded'] = self._counts.get('recorded', 0) + 1
+                yield m
+
+    def _paired(self) -> Iterator[Command]:
+        """Each receipt paired with the recorded command it names: by identity (a trajectory's
+        ``header.frame_id``) when it has one, else the next unnamed recorded message of its topic. A recorded
+        command is looked for among those logged within :data:`PAIRING_WINDOW_NS` of its receipt, so that
+        memory stays bounded whatever the log's length."""
+        counts = self._counts
+        pending = {topic: _Pending(self._recorded(topic)) for topic in COMMAND_TOPICS}
+        last = None
+        for r in self.log.messages(['simulator/command_receipts'], decoded=True):
+            ns = r.stamp_ns
+            if last is not None and ns < last:        # a reset: the receipts of the next run are not paired
+                counts['reset'] = 1
+                break
+            last = ns
+            topic, command_id = split_receipt_frame(r.message.frame_id)
+            queue = pending.get(topic)
+            m = queue.take(command_id, r.log_time_ns) if queue is not None else None
+            if m is None:
+                counts['missing'] = counts.get('missing', 0) + 1
+            else:
+                counts['paired'] = counts.get('paired', 0) + 1
+                yield Command(ns, topic, m)
+        for queue in pending.values():               # counted: recorded commands without a receipt
+            queue.drain()
+
+    def _estimated(self) -> Iterator[Command]:
+        """A log without receipts: each command at the stamp of the last pose logged at or before it, in log
+        order, up to the first command whose estimate goes back in time (after a reset)."""
+        order = sorted((first.log_time_ns, i, topic) for i, topic in enumerate(COMMAND_TOPICS)
+                       if (first := self.log.first(topic)) is not None)
+        recorded = heapq.merge(*(self._tagged(topic) for _, _, topic in order), key=lambda pair: pair[1].log_time_ns)
+        poses = ((m.log_time_ns, m.stamp_ns or 0) for m in self.log.messages(['particle/pose'])
+                 if read_pose_xz(m.data) is not None or self.log.decodes(m))
+        pose = next(poses, None)
+        log_ns, stamp, last = None, 0, 0
+        for topic, m in recorded:
+            while pose is not None and pose[0] <= m.log_time_ns:
+                # the largest (log time, stamp) logged at or before the command: ties in log time by stamp
+                stamp = pose[1] if log_ns is None or pose[0] > log_ns else max(stamp, pose[1])
+                log_ns = pose[0]
+                pose = next(poses, None)
+            if stamp < last:
+                return
+            last = stamp
+            yield Command(stamp, topic, m)
+
+    def _tagged(self, topic: str) -> Iterator[tuple[str, LogMessage]]:
+        for m in self._recorded(topic):
+            yield topic, m
+
+
+class _Pending:
+    """The recorded messages of one command topic near the receipt being paired: read ahead up to
+    :data:`PAIRING_WINDOW_NS` of log time past it, forgotten that long behind it (never paired, they count
+    as recorded without a receipt)."""
+
+    def __init__(self, recorded: Iterator[LogMessage]):
+        self._recorded = recorded
+        self._next: LogMessage | None = next(recorded, None)
+        self._named: dict[str, deque[LogMessage]] = {}
+        self._unnamed: deque[LogMessage] = deque()
+        self._order: deque[tuple[int, str]] = deque()   # (log time, identity) of the named ones, as read
+
+    def take(self, command_id: str, receipt_log_ns: int) -> LogMessage | None:
+        """The recorded message named ``command_id`` (the next unnamed one for ''), or None."""
+        while self._next is not None and self._next.log_time_ns <= receipt_log_ns + PAIRING_WINDOW_NS:
+            m, self._next = self._next, next(self._recorded, None)
+            name = _command_id(m)
+            if name:
+                self._named.setdefault(name, deque()).append(m)
+                self._order.append((m.log_time_ns, name))
+            else:
+                self._unnamed.append(m)
+        while self._order and self._order[0][0] < receipt_log_ns - PAIRING_WINDOW_NS:
+            _, name = self._order.popleft()
+            if self._named.get(name):
+                self._named[name].popleft()
+                if not self._named[name]:
+                    del self._named[name]
+        if not command_id:
+            return self._unnamed.popleft() if self._unnamed else None
+        same = self._named.get(command_id)
+        if not same:
+            return None
+        m = same.popleft()
+        if not same:
+            del self._named[command_id]
+        return m
+
+    def drain(self) -> None:
+        """Read the rest (the reader counts what it reads)."""
+        for _ in self._recorded:
+            pass
+
+
+def _command_id(m: LogMessage) -> str:
+    """A recorded command's identity: a trajectory's ``header.frame_id`` ('' for set-points and unnamed),
+    read from its bytes."""
+    return header_frame_id(m.data) if m.topic.endswith('actuator/trajectory') else ''
+
+
+def open_recording(log: LogReader) -> LogRecording:
+    """The log's recording, streamed (:class:`LogRecording`)."""
+    return LogRecording(log)
 
 
 def read_recording(log: LogReader) -> Recording:
-    """Everything a replay needs from ``log``. Raises :class:`ReplayError` when it has no pose or its
-    parameters cannot be read."""
-    notes: list[str] = []
-    specs = model_specs()
-    try:
-        snapshots = recorded_parameters(log)
-    except ValueError as err:
-        raise ReplayError(f'simulator/parameters unreadable: {err}') from err
-    flat = {name: value for name, value in (snapshots[0] if snapshots else {}).items() if name in specs}
-    pose_msgs = list(log.messages(['particle/pose'], decoded=True))
-    poses, reset = first_segment([(m.stamp_ns or 0, m) for m in pose_msgs])
-    if not poses:
-        raise ReplayError('the log has no particle/pose')
-    if reset:
-        notes.append('the log holds a simulator/reset: only the run before it is replayed')
-    step_periods = sorted({float(s['step_period']) for s in snapshots if 'step_period' in s}) or [1e-3]
-    stops, exact = stop_times([(ns, m.message.pose.position.x, m.message.pose.position.z) for ns, m in poses],
-                              step_periods)
-    commands, receipts = _commands(log, [(m.log_time_ns, m.stamp_ns or 0) for m in pose_msgs], notes)
-    if poses[0][0] != 0:
-        notes.append(f'the first recorded pose is at t = {poses[0][0] * 1e-9:.6f} s, not 0 (the recorder joined '
-                     'late): earlier stops unknown, started from t = 0')
-    return Recording(str(log.path), flat, snapshots, stops, exact, sorted(commands, key=lambda c: c.receipt_ns),
-                     receipts, reset, notes)
-
-
-def _commands(log: LogReader, pose_log: list[tuple[int, int]], notes: list[str]) -> tuple[list[Command], str]:
-    """The commands of the log in receipt order, paired with their receipt sim times [ns]."""
-    recorded: dict[str, list[LogMessage]] = defaultdict(list)
-    for m in log.messages(COMMAND_TOPICS, decoded=True):
-        recorded[next(t for t in COMMAND_TOPICS if m.topic.endswith(t))].append(m)
-    if log.resolve('simulator/command_receipts') is None:
-        if recorded:
-            notes.append('the log has no simulator/command_receipts (recorded by an older simulator): receipt '
-                         'times estimated from the last pose recorded before each command, ambiguous by a tick')
-        return _estimated(recorded, pose_log), 'estimated'
-    receipts, reset = first_segment([(m.stamp_ns, split_receipt_frame(m.message.frame_id))
-                                     for m in log.messages(['simulator/command_receipts'], decoded=True)])
-    named: dict[str, list[LogMessage]] = defaultdict(list)       # identity: recorded messages (resent ones too)
-    unnamed: dict[str, list[LogMessage]] = defaultdict(list)
-    for topic, msgs in recorded.items():
-        for m in msgs:
-            command_id = _command_id(m.message)
-            (named[command_id] if command_id else unnamed[topic]).append(m)
-    queues = {topic: iter(msgs) for topic, msgs in unnamed.items()}
-    out, missing = [], 0
-    for ns, (topic, command_id) in receipts:
-        m = (named[command_id].pop(0) if named.get(command_id) else None) if command_id else \
-            next(queues.get(topic, iter(())), None)
-        if m is None:
-            missing += 1
-        else:
-            out.append(Command(ns, topic, m.message))
-    if missing:
-        notes.append(f'{missing} commands the simulator received are not in the log (the recorder missed them, '
-                     'e.g. it started after them): replayed without them')
-    unacknowledged = sum(len(msgs) for msgs in recorded.values()) - len(out)
-    if unacknowledged and not reset:
-        notes.append(f'{unacknowledged} recorded commands have no receipt from the simulator (sent after it '
-                     'stopped, or it missed them): not applied')
-    return out, 'recorded'
-
-
-def _command_id(message: Any) -> str:
-    """A recorded command's identity: a trajectory's ``header.frame_id`` ('' for set-points and unnamed)."""
-    header = getattr(message, 'header', None)
-    return getattr(header, 'frame_id', '') if header is not None else ''
-
-
-def _estimated(recorded: Mapping[str, list[LogMessage]], pose_log: list[tuple[int, int]]) -> list[Command]:
-    """Receipt times for a log without receipts: the stamp of the last pose logged before each command."""
-    pose_log = sorted(pose_log)
-    log_times = [log_ns for log_ns, _ in pose_log]
-    out = []
-    for topic, msgs in recorded.items():
-        for m in msgs:
-            i = bisect.bisect_right(log_times, m.log_time_ns)
-            out.append((m.log_time_ns, Command(pose_log[i - 1][1] if i else 0, topic, m.message)))
-    return [c for _, c in sorted(out, key=lambda pair: pair[0])]
+    """Everything a replay needs from ``log``, read into memory (for a short log replayed many times).
+    Raises :class:`ReplayError` when it has no pose or its parameters cannot be read."""
+    streamed = LogRecording(log)
+    stops = list(streamed.iter_stops())
+    commands = list(streamed.iter_commands())
+    return Recording(streamed.path, streamed.flat, streamed.snapshots, stops, streamed.exact, commands,
+                     streamed.receipts, streamed.reset, streamed.notes)
 
 
 def apply_command(stepper: Stepper, cmd: Command) -> bool:
@@ -246,7 +443,8 @@ def apply_command(stepper: Stepper, cmd: Command) -> bool:
     n = stepper.model.n_actuators
     try:
         if cmd.topic == 'actuator/trajectory':
-            stepper.command_trajectory(parse_trajectory(cmd.message, joint_names(n), stepper.limits))
+            stepper.command_trajectory(parse_trajectory_cdr(cmd.recorded.data, joint_names(n), stepper.limits,
+                                                            deserialize=lambda _: cmd.message))
         else:
             stepper.command_setpoints(parse_setpoints(cmd.message.data, n, stepper.limits))
     except (CommandRejected, ValueError):
@@ -254,16 +452,17 @@ def apply_command(stepper: Stepper, cmd: Command) -> bool:
     return True
 
 
-def replay(stepper: Stepper, recording: Recording, on_pose: Callable[[Stop, Observation], None], *,
+def replay(stepper: Stepper, recording: Replayable, on_pose: Callable[[Stop, Observation], None], *,
            on_command: Callable[[bool], None] | None = None,
            progress: Callable[[int, int], None] | None = None) -> SimulationError | None:
     """Drive ``stepper`` (fresh, at t = 0) through the recording's stops and commands as the simulator did,
     calling ``on_pose(stop, observation)`` at each recorded pose and ``on_command(applied)`` per command;
-    ``progress(stops done, stops)`` now and then. Returns the integration's failure, which ends the replay,
-    or None when it reached the last stop."""
-    stops = recording.stops
-    pending: Iterator[Command] = iter(recording.commands)
+    ``progress(recorded poses done, recorded poses)`` now and then. Returns the integration's failure,
+    which ends the replay, or None when it reached the last stop. The stops and the commands are read to
+    their ends either way (what a :class:`LogRecording` says about the log counts them all)."""
+    pending = recording.iter_commands()
     next_cmd = next(pending, None)
+    total, done = recording.pose_count, 0
 
     def receive(cmd: Command) -> Command | None:
         applied = apply_command(stepper, cmd)
@@ -271,23 +470,30 @@ def replay(stepper: Stepper, recording: Recording, on_pose: Callable[[Stop, Obse
             on_command(applied)
         return next(pending, None)
 
+    failure = None
+    stops = recording.iter_stops()
     try:
-        for i, stop in enumerate(stops):
-            if progress is not None and not i % 256:
-                progress(i, len(stops))
+        for stop in stops:
             while next_cmd is not None and next_cmd.receipt_ns < stop.ns:  # received between two known stops
                 _advance(stepper, next_cmd.receipt_ns / 1e9)
                 next_cmd = receive(next_cmd)
             _advance(stepper, stop.t)
             if stop.pose is not None:
+                if progress is not None and not done % PROGRESS_EVERY:
+                    progress(done, total)
+                done += 1
                 on_pose(stop, stepper.observe())
             while next_cmd is not None and next_cmd.receipt_ns == stop.ns:
                 next_cmd = receive(next_cmd)
     except SimulationError as err:
-        return err
-    if progress is not None:
-        progress(len(stops), len(stops))
-    return None
+        failure = err
+    for _ in stops:         # after a failure, the rest: read for what a LogRecording says (exact, reset)
+        pass
+    for _ in pending:       # the commands not applied: read for the counts
+        pass
+    if progress is not None and failure is None:
+        progress(done, total)
+    return failure
 
 
 def _advance(stepper: Stepper, t: float) -> None:

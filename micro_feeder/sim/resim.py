@@ -19,11 +19,12 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from ..interface.names import TRANSITION_KINDS
+from ..interface.transitions import status_messages
 from ..logs.reader import LogReader
 from ..logs.sim_parameters import run_mode
 from ..physics.dynamics import Observation
 from ..settings import model_specs
-from .replay import ReplayError, Stop, read_recording, replay
+from .replay import ReplayError, Stop, open_recording, replay
 from .stepper import Stepper, build_model
 
 SIM_SECONDS_PER_WALL_SECOND = 20.0  # resim at 1 kHz poses, measured: 60 s of sim time in 3 s
@@ -92,7 +93,8 @@ class ResimReport:
 def resimulate(log: LogReader, overrides: Mapping[str, Any] | None = None, *,
                progress: Callable[[int, int], None] | None = None, max_sim_time: float | None = None) -> ResimReport:
     """Re-simulate ``log`` (with model parameters ``overrides`` on top of the recorded ones) and compare;
-    ``progress(stops done, stops)`` is called as it goes.
+    ``progress(recorded poses done, recorded poses)`` is called as it goes. The log is streamed (one chunk
+    at a time, the comparison kept as running maxima), so memory does not grow with its length.
 
     Raises :class:`ResimError` when the log has no pose, an override is not a model parameter, the
     parameters build no model, or the poses reach beyond ``max_sim_time`` [s] (a cost the caller refuses).
@@ -104,10 +106,10 @@ def resimulate(log: LogReader, overrides: Mapping[str, Any] | None = None, *,
         raise ResimError(f'not a model parameter: {", ".join(foreign)} (resim changes only the simulated model; '
                          'see docs/parameters.md)')
     try:
-        recording = read_recording(log)
+        recording = open_recording(log)
     except ReplayError as err:
         raise ResimError(f'{err} to compare with' if 'particle/pose' in str(err) else str(err)) from err
-    notes = list(recording.notes)
+    notes = []      # after the recording's own, known once it has been read
     if recording.snapshots:
         flat = dict(recording.flat)
         source = 'recorded (simulator/parameters)'
@@ -121,7 +123,7 @@ def resimulate(log: LogReader, overrides: Mapping[str, Any] | None = None, *,
         model = build_model(flat)
     except ValueError as err:
         raise ResimError(f'the parameters build no model: {err}') from err
-    last_s = recording.stops[-1].ns * 1e-9
+    last_s = recording.last_ns * 1e-9
     if max_sim_time is not None and last_s > max_sim_time:
         raise ResimError(f'the poses reach t = {last_s:.6g} s of sim time, and resim integrates from t = 0: about '
                          f'{last_s / SIM_SECONDS_PER_WALL_SECOND:.3g} s of computing (stamps in wall-clock time are '
@@ -130,7 +132,7 @@ def resimulate(log: LogReader, overrides: Mapping[str, Any] | None = None, *,
     stepper = Stepper(model)
     first = recording.snapshots[0] if recording.snapshots else None
     report = ResimReport(str(log.path), run_mode(first), source, overrides, 0, 0.0, 0.0, 0.0, 0.0, None, 0, 0,
-                         recording.exact, recording.receipts, notes)
+                         True, recording.receipts)
 
     def count(applied: bool) -> None:
         if applied:
@@ -142,10 +144,12 @@ def resimulate(log: LogReader, overrides: Mapping[str, Any] | None = None, *,
                      progress=progress)
     if failure is not None:
         notes.append(f'the re-simulation failed at t = {stepper.t:.6f} s: {failure}; compared up to there')
+    report.exact_stop_times = recording.exact
     report.transitions = stepper.state.transitions
     report.recorded_transitions = _recorded_transitions(log, round(report.sim_time * 1e9))
     if not recording.exact and report.max_error != 0.0:  # explains a difference; none when there is none
         notes.append(REAL_TIME_NOTE)
+    report.notes = recording.notes + notes
     return report
 
 
@@ -155,11 +159,16 @@ def _recorded_transitions(log: LogReader, until_ns: int) -> dict[str, int] | Non
     if log.resolve('particle/transitions') is None:
         return None
     counts = dict.fromkeys(TRANSITION_KINDS, 0)
-    for m in log.messages(['particle/transitions'], decoded=True):
+    for m in log.messages(['particle/transitions']):
+        kinds = status_messages(m.data)       # read from the bytes: a log holds ~2 a stroke
+        if kinds is None:
+            if not log.decodes(m):
+                continue
+            kinds = [status.message for status in m.message.status]
         if m.stamp_ns is not None and m.stamp_ns <= until_ns:
-            for status in m.message.status:
-                if status.message in counts:
-                    counts[status.message] += 1
+            for kind in kinds:
+                if kind in counts:
+                    counts[kind] += 1
     return counts
 
 
