@@ -7,7 +7,7 @@ import math
 import os
 import re
 
-from . import CommandError
+from . import CommandError, ros_done
 from ._foxglove import add_foxglove_option, announce, live_view
 
 _NAME = re.compile(r'[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*')
@@ -83,11 +83,14 @@ def run(args: argparse.Namespace) -> int:
     if args.namespace:
         ros_args += ['-r', f'__ns:=/{args.namespace.strip("/")}']
     argv = ['replay', '--ros-args', *ros_args]
-    with live_view(args.foxglove) as viewer:
-        if viewer is None:
-            return replay_main(argv)
+    try:
+        with live_view(args.foxglove) as viewer:
+            if viewer is None:
+                return replay_main(argv)
 
-        def tap(node: object) -> None:
-            viewer.tap(node)
-            announce(viewer)
-        return replay_main(argv, tap=tap)
+            def tap(node: object) -> None:
+                viewer.tap(node)
+                announce(viewer)
+            return replay_main(argv, tap=tap)
+    finally:
+        ros_done()      # the player shut its rclpy context down: the console script leaves at once

@@ -42,6 +42,7 @@ from ..logs.metadata import parse_qos, read_qos_overrides
 from ..logs.reader import LogMessage, LogReader
 from ..progress import Progress
 from ._ros import StopFlag, message_class, qos_from_dict, spin_until
+from .fastdds_shm import remove_stale_files
 
 DEFAULT_QOS = QoSProfile(depth=100)
 # rosbag2's /clock publisher (rclcpp::ClockQoS): best effort, volatile, keep last 1.
@@ -288,6 +289,7 @@ class Replay(Node):
 def main(args: list[str] | None = None, tap: Callable[[Node], None] | None = None) -> int:
     """Console script ``replay``: ``replay --ros-args -p log:=out/run1 -p rate:=2.0``. ``tap`` is given the
     node before it plays (``micro-feeder replay --foxglove``)."""
+    remove_stale_files()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = StopFlag().install()
     try:
