@@ -24,7 +24,7 @@ lint: $(STAMP)
 	$(BIN)/lint-imports --no-cache
 
 test: lint foxglove-client
-	$(BIN)/python -m pytest test -m 'not paths'
+	$(BIN)/python -m pytest test -m 'not paths and not slow'
 
 # The real Foxglove WebSocket client the live-view tests use (npm, pinned by package-lock.json; node >= 18).
 FOXGLOVE_CLIENT := test/foxglove_client

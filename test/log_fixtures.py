@@ -115,3 +115,38 @@ def rewrite_with_rosbags(source: Path, target: Path) -> None:
                                               offered_qos_profiles=c.ext.offered_qos_profiles)
         for c, t, raw in reader.messages():
             writer.write(out[c.id], t, raw)
+
+
+def write_run_log(path: Path, *, first: int = 0, n: int = 100, trajectories: int = 0, receipts: int = 0,
+                  diag_commands: int | None = None, lost: int = 0) -> None:
+    """A log as the recorder writes it of a simulator run at 1 kHz: poses from sim time ``first`` ms (a
+    recorder that joined late starts later than 0), the last ``trajectories`` of the commands on
+    ``actuator/trajectory``, ``receipts`` of them acknowledged on ``simulator/command_receipts``, the
+    simulator's ``commands_received`` on ``/diagnostics`` (``diag_commands``; none when None), and the
+    recorder's counters (``lost`` messages of actuator/trajectory lost while recording)."""
+    from std_msgs.msg import Header
+
+    writer = LogWriter(path)
+    writer.add_topic('/particle/pose', 'geometry_msgs/msg/PoseStamped')
+    t = T0
+    for i in range(first, first + n):
+        t = T0 + (i - first) * 1_000_000
+        writer.write('/particle/pose', serialize_message(pose(i)), t)
+    traj = one_of_each()['/actuator/trajectory']
+    for k in range(trajectories):
+        writer.add_topic('/actuator/trajectory', type_name(traj))
+        writer.write('/actuator/trajectory', serialize_message(traj), T0 + k * 10_000_000 + 1)
+    for k in range(receipts):
+        receipt = Header(frame_id='actuator/trajectory')
+        receipt.stamp.nanosec = (first + k * 10) * 1_000_000
+        writer.add_topic('/simulator/command_receipts', 'std_msgs/msg/Header')
+        writer.write('/simulator/command_receipts', serialize_message(receipt), T0 + k * 10_000_000 + 2)
+    if diag_commands is not None:
+        diag = DiagnosticArray(status=[DiagnosticStatus(name='simulator: loop', values=[
+            KeyValue(key='commands_received', value=str(diag_commands))])])
+        writer.add_topic('/diagnostics', type_name(diag))
+        writer.write('/diagnostics', serialize_message(diag), t + 3)
+    received = n + trajectories + receipts + (diag_commands is not None)
+    writer.custom_data.update({'received_total': str(received), 'lost_total': str(lost),
+                               'incompatible_qos_total': '0', 'lost./actuator/trajectory': str(lost)})
+    writer.close()

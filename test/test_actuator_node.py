@@ -68,12 +68,27 @@ def test_start_and_stop(ros_context: Context) -> None:
         ex.shutdown()
 
 
-def test_auto_start_sends_once_when_a_subscriber_appears(ros_context: Context) -> None:
+def test_auto_start_waits_for_the_simulator_and_sends_once(ros_context: Context) -> None:
+    """Another subscriber (the probe, as a recorder or a viewer would be) is not the simulator: nothing is
+    sent until a simulator is there, then the burst goes once, named, and the simulator applies it once."""
     actuator, probe, ex = _rig(ros_context)
     try:
+        wait_until(lambda: actuator.trajectory_subscribers() >= 1, 10.0, executor=ex, what='probe matched')
+        for _ in range(40):                                   # 0.4 s of auto-start ticks with only the probe
+            ex.spin_once(timeout_sec=0.01)
+        assert not probe.msgs['actuator/trajectory'] and actuator.bursts == 0
+        assert 'waiting for the simulator' in actuator.state()
+        sim = Simulator(context=ros_context, overrides={'start_paused': True})
+        ex.add_node(sim)
         wait_until(lambda: probe.msgs['actuator/trajectory'], 10.0, executor=ex, what='auto-started burst')
-        wait_until(lambda: actuator._auto is None, 1.0, executor=ex, what='auto timer gone')
-        assert actuator.bursts == 1
+        wait_until(lambda: sim.commands.received == 1, 10.0, executor=ex, what='the simulator got it')
+        for _ in range(40):
+            ex.spin_once(timeout_sec=0.01)
+        assert actuator.bursts == 1 and len(probe.msgs['actuator/trajectory']) == 1
+        assert actuator._auto is None and actuator.state() == 'idle'
+        command_id = probe.msgs['actuator/trajectory'][0].header.frame_id
+        assert command_id.startswith('/actuator@') and command_id.endswith(':b1')
+        assert list(sim.stepper.applied) == [command_id]
     finally:
         ex.shutdown()
 

@@ -10,7 +10,7 @@ import warnings
 from pathlib import Path
 
 import pytest
-from log_fixtures import T0, one_of_each, pose, type_name, write_motion_log
+from log_fixtures import T0, one_of_each, pose, type_name, write_motion_log, write_run_log
 from mcap.reader import make_reader
 from rclpy.serialization import serialize_message
 from rosbags.highlevel import AnyReader
@@ -145,3 +145,52 @@ def test_message_is_decoded_once(tmp_path):
     first = m.message
     assert m.message is first and first.pose.position.x == 0.0
     assert len(calls) == 1
+
+
+def _loss(path: Path) -> list[str]:
+    """The loss lines of ``micro-feeder info``'s summary."""
+    lines = format_summary(summarize(LogReader(path))).splitlines()
+    first = next(i for i, line in enumerate(lines) if line.startswith('loss'))
+    return lines[first:]
+
+
+def test_info_says_a_complete_log_lost_nothing(tmp_path):
+    write_run_log(tmp_path / 'log', trajectories=2, receipts=2, diag_commands=2)
+    loss = _loss(tmp_path / 'log')
+    assert loss[0].startswith('loss       none  (') and len(loss) == 1, loss
+
+
+def test_info_reports_a_late_start_as_missing(tmp_path):
+    """Issue 26: a recorder that joined late has no loss counted (it lost nothing once subscribed), but the
+    log misses the start: the first pose is at 0.67 s of sim time (one tick is at most 2 ms) and the one
+    command the simulator received before (its /diagnostics counts it; the receipt went out before the
+    recorder was there too) is in no topic. ``info`` said 'loss none'."""
+    write_run_log(tmp_path / 'log', first=670, diag_commands=1)
+    loss = _loss(tmp_path / 'log')
+    assert loss[0].startswith('loss       none while recording  (')
+    assert loss[1:] == [
+        '           start missing: first pose at sim time 0.670000 s, not 0 (one tick is at most 2 ms): the '
+        'recorder joined late',
+        '           start missing: the first 1 of the 1 commands the simulator received are not in the log '
+        '(sent before the recorder subscribed)']
+
+
+def test_info_reports_missing_first_commands(tmp_path):
+    """Poses from t = 0, but the recorder subscribed to actuator/trajectory after the first 2 of 3 commands:
+    their receipts are in the log, the commands are not. Commands the recorder counted lost are loss while
+    recording, not a missing start."""
+    write_run_log(tmp_path / 'log', trajectories=1, receipts=3)
+    loss = _loss(tmp_path / 'log')
+    assert loss[1:] == ['           start missing: the first 2 of the 3 commands the simulator received are not '
+                        'in the log (sent before the recorder subscribed)'], loss
+    write_run_log(tmp_path / 'lost', trajectories=1, receipts=3, lost=2)
+    loss = _loss(tmp_path / 'lost')
+    assert loss[0].startswith('loss       2 messages lost') and not any('start missing' in x for x in loss), loss
+
+
+def test_info_cli_prints_the_missing_start(tmp_path, capsys):
+    from micro_feeder.cli import main
+
+    write_run_log(tmp_path / 'log', first=670)
+    assert main(['info', str(tmp_path / 'log')]) == 0
+    assert 'start missing: first pose at sim time 0.670000 s' in capsys.readouterr().out

@@ -14,6 +14,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from ros_helpers import wait_until
 
+from micro_feeder.interface.names import split_receipt_frame
 from micro_feeder.logs.reader import LogReader
 from micro_feeder.nodes.simulator import Simulator
 
@@ -58,8 +59,9 @@ def test_two_namespaced_feeders_run_side_by_side_without_crosstalk(ros_context: 
         topics = set(log.topics)
         assert all(t.startswith(ns + '/') or t == '/diagnostics' for t in topics), topics
         assert f'{ns}/particle/pose' in topics and '/clock' not in topics
-        receipts = [m.message.frame_id for m in log.messages([f'{ns}/simulator/command_receipts'])]
-        assert receipts == ['actuator/trajectory'], receipts        # its own actuator's burst only
+        receipts = [split_receipt_frame(m.message.frame_id) for m in log.messages([f'{ns}/simulator/command_receipts'])]
+        assert [topic for topic, _ in receipts] == ['actuator/trajectory'], receipts   # its own actuator's burst
+        assert receipts[0][1].startswith(f'{ns}/actuator@'), receipts                 # only, named by it
         poses = [m.message.pose.position.x for m in log.messages([f'{ns}/particle/pose'])]
         assert abs(poses[0] - x0) < 1e-12 and all(abs(x - x0) < 50e-6 for x in poses)
         loops = {s.name for m in log.messages(['/diagnostics']) for s in m.message.status if s.name.endswith(': loop')}
@@ -88,7 +90,7 @@ def test_a_second_simulator_in_one_namespace_is_refused_with_the_reason(ros_cont
         exe = shutil.which('simulator', path=str(Path(sys.executable).parent))
         second = subprocess.Popen([exe, '--ros-args', '-r', '__ns:=/dup'], stdout=subprocess.PIPE,
                                   stderr=subprocess.STDOUT, text=True)
-        deadline = 60.0
+        deadline = 120.0      # a simulator process starts in ~3 s idle; a fresh clone under load 9 took > 60 s
         while second.poll() is None and deadline > 0:     # spin the first so that it is discoverable
             executor.spin_once(timeout_sec=0.1)
             deadline -= 0.1

@@ -1,11 +1,14 @@
 """The recorder node in-process: latched state captured, every published message recorded, loss
-counters on /diagnostics and in the log, clean stop through the service, parameters validated."""
+counters on /diagnostics and in the log, clean stop through the service, parameters validated, a recording
+fault reported on /diagnostics."""
 
 from __future__ import annotations
 
+import shutil
+
 import pytest
 import rclpy
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import PoseStamped
 from log_fixtures import pose
 from rclpy.exceptions import InvalidParameterValueException
@@ -69,3 +72,44 @@ def test_out_of_range_flush_period_is_refused(ros_context, tmp_path):
     with pytest.raises(InvalidParameterValueException):
         Recorder(context=ros_context, parameter_overrides=[
             Parameter('output', value=str(tmp_path / 'log')), Parameter('flush_period', value=0.0)])
+
+
+def test_a_removed_log_directory_is_reported_once_on_diagnostics_and_the_log_restored(ros_context, tmp_path):
+    """The recorder node in-process: the fault reaches /diagnostics as ERROR with its keys, the executor never
+    sees an exception, and the log is restored where it was."""
+    source = rclpy.create_node('source', context=ros_context)
+    poses = source.create_publisher(PoseStamped, 'particle/pose', 100)
+    diagnostics = []
+    source.create_subscription(DiagnosticArray, '/diagnostics', diagnostics.append, 10)
+    log = tmp_path / 'log'
+    recorder = Recorder(context=ros_context, parameter_overrides=[
+        Parameter('output', value=str(log)), Parameter('flush_period', value=0.1)])
+    executor = EventsExecutor(context=ros_context)
+    executor.add_node(recorder)
+    executor.add_node(source)
+
+    def errors() -> list:
+        return [s for d in diagnostics for s in d.status
+                if s.name.startswith('recorder') and s.level == DiagnosticStatus.ERROR]
+    try:
+        wait_until(lambda: poses.get_subscription_count() == 1, 10, executor=executor, what='recorder subscribed')
+        for i in range(200):
+            poses.publish(pose(i))
+        wait_until(lambda: (log / 'log_0.mcap').stat().st_size > 2000, 10, executor=executor, what='a chunk on disk')
+        shutil.rmtree(log)
+        for i in range(200, 300):
+            poses.publish(pose(i))
+        wait_until(lambda: errors(), 10, executor=executor, what='ERROR on /diagnostics')
+        assert recorder.done.done() and recorder.fault.reason == 'log directory removed'
+    finally:
+        executor.shutdown()
+        recorder.close()
+        recorder.destroy_node()
+        source.destroy_node()
+    status = errors()[0]
+    assert status.message.startswith('recording stopped at sim time') and 'log directory removed' in status.message
+    values = {kv.key: kv.value for kv in status.values}
+    assert values['stopped_early'] == 'true' and values['stop_reason'] == 'log directory removed'
+    restored = LogReader(log)
+    assert not restored.truncated and 0 < restored.message_count <= 300
+    assert restored.recorder_info['stop_reason'] == 'log directory removed'

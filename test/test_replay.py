@@ -262,3 +262,109 @@ def test_a_dead_player_ends_the_replay_with_the_reason(ros_context, tmp_path, mo
     finally:
         replay.close()
         replay.destroy_node()
+
+
+def _replay_process(log, *options: str):
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    return subprocess.Popen([str(Path(sys.executable).parent / 'micro-feeder'), 'replay', str(log), *options],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def _pose_listener(context):
+    listener = rclpy.create_node('listener', context=context)
+    got: list[bytes] = []
+    listener.create_subscription(PoseStamped, '/particle/pose', got.append, 1000, raw=True)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(listener)
+    return listener, executor, got
+
+
+def test_wait_for_subscribers_on_a_whole_log_needs_one_subscriber_not_one_per_topic(ros_context, tmp_path):
+    """Issue 26: replaying every topic of a log, ``--wait-for-subscribers`` starts once any topic has a
+    subscriber (here /particle/pose only, in this process; the log also has twist, wrench and contact state,
+    which nobody listens to): it used to wait for a subscriber on every recorded topic, forever."""
+    poses = write_motion_log(tmp_path / 'log', n=N)
+    listener, executor, got = _pose_listener(ros_context)
+    proc = _replay_process(tmp_path / 'log', '--wait-for-subscribers')
+    try:
+        wait_until(lambda: proc.poll() is not None and len(got) >= N, 60, executor=executor,
+                   what='replay done and every pose delivered')
+    finally:
+        proc.kill()
+        _, err = proc.communicate()
+        executor.shutdown()
+        listener.destroy_node()
+    assert proc.returncode == 0, err
+    assert got == poses
+
+
+def test_wait_for_subscribers_times_out_naming_the_topics_without_one(ros_context, tmp_path):
+    """Every topic given in ``topics`` needs a subscriber; when one still has none after
+    ``wait_for_subscribers_timeout``, the replay ends without publishing anything and ``timed_out`` names that
+    topic, not the matched one."""
+    write_motion_log(tmp_path / 'log', n=N)
+    listener, executor, got = _pose_listener(ros_context)
+    replay = Replay(context=ros_context, parameter_overrides=[
+        Parameter('log', value=str(tmp_path / 'log')), Parameter('topics', value=['particle/pose', 'particle/twist']),
+        Parameter('wait_for_subscribers', value=True), Parameter('wait_for_subscribers_timeout', value=0.5)])
+    executor.add_node(replay)
+    try:
+        wait_until(lambda: replay._outputs['/particle/pose'].get_subscription_count() == 1, 10, executor=executor,
+                   what='the pose subscriber matched')
+        replay.start()
+        waited = wait_until(replay.finished.done, 10, executor=executor, what='the wait given up')
+    finally:
+        replay.close()
+        executor.shutdown()
+        replay.destroy_node()
+        listener.destroy_node()
+    assert 0.5 <= waited < 5
+    assert replay.timed_out == 'no subscriber after 0.5 s on /particle/twist: nothing was replayed'
+    assert replay.published == 0 and got == []
+
+
+def test_cli_wait_timeout_names_the_topics_and_exits_1(tmp_path):
+    """``micro-feeder replay --wait-for-subscribers --wait-timeout S`` with no subscriber anywhere: one error
+    line naming the topics (replaying the whole log, any one of them would have done), status 1."""
+    import subprocess
+
+    write_motion_log(tmp_path / 'log', n=N)
+    proc = _replay_process(tmp_path / 'log', '--wait-for-subscribers', '--wait-timeout', '1')
+    try:
+        out, err = proc.communicate(timeout=60)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, err = proc.communicate()
+    assert proc.returncode == 1, err
+    assert ('replay: error: no subscriber after 1 s on any of /particle/contact_state, /particle/contact_wrench, '
+            '/particle/pose, /particle/twist: nothing was replayed') in err.splitlines(), err
+    assert 'Traceback' not in err and 'no message published' in out
+
+
+def test_ctrl_c_stops_a_replay_with_status_130(ros_context, tmp_path):
+    """Issue 26: SIGINT in the middle of a replay ends ``micro-feeder replay`` with status 130 (docs/robustness.md)
+    and one ``interrupted`` line, no traceback; it used to exit 0 as if the replay had finished."""
+    import signal
+
+    write_motion_log(tmp_path / 'log', n=N)
+    listener, executor, got = _pose_listener(ros_context)
+    proc = _replay_process(tmp_path / 'log', '--topic', 'particle/pose', '--wait-for-subscribers',
+                           '--rate', '0.01')     # 0.3 s of log in 30 s
+    try:
+        wait_until(lambda: len(got) >= 10 or proc.poll() is not None, 60, executor=executor,
+                   what='the replay under way')
+        assert proc.poll() is None, proc.communicate()
+        proc.send_signal(signal.SIGINT)
+        wait_until(lambda: proc.poll() is not None, 10, executor=executor, what='the replay ended by SIGINT')
+    finally:
+        proc.kill()
+        _, err = proc.communicate()
+        executor.shutdown()
+        listener.destroy_node()
+    assert proc.returncode == 130, err
+    assert 'Traceback' not in err
+    assert 'micro-feeder replay: interrupted' in err
+    assert len(got) < N

@@ -90,9 +90,9 @@ def _record_stepped_run(context: Context, path: Path) -> dict[str, int]:
         send('actuator/command', Float64MultiArray(data=[10e-6]))    # a set-point, held from receipt
         probe.step(executor, 20)
         send('actuator/trajectory', _hold(0.0, 1.0))                 # outside the piezo limits: refused
-        send('actuator/trajectory', _hold(0.001, 5e-6))              # a stamp in the past: starts now
-        probe.step(executor, 40)
-        assert sim.rejected == 1
+        send('actuator/trajectory', _hold(0.001, 5e-6))              # stamped in the past, joined with a
+        probe.step(executor, 40)                                     # jump: refused as well
+        assert sim.rejected == 2, sim.last_rejection
         wait(lambda: recorder.received['/particle/pose'] == at_start + STEPS, 'every pose recorded')
         received = {topic: n for topic, n in recorder.received.items()}
     finally:
@@ -123,7 +123,7 @@ def test_stepped_log_resimulates_bit_for_bit(stepped_log: Path) -> None:
     report = resimulate(log)
     assert report.poses == log.topics['/particle/pose'].count in (STEPS, STEPS + 1)  # + the pose at t = 0
     assert round(report.sim_time * 1e9) == round(STEPS * STEP * 1e9)
-    assert report.commands_applied == 5 and report.commands_rejected == 1
+    assert report.commands_applied == 4 and report.commands_rejected == 2
     assert report.exact_stop_times and report.receipts == 'recorded' and report.mode == 'stepped'
     assert report.max_error == 0.0 and report.identical, report.verdict()
     assert report.parameters.startswith('recorded')

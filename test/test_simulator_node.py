@@ -207,15 +207,20 @@ def test_replacement_and_stop(stepped: Rig) -> None:
     assert stepped.sim.rejected == 0
 
 
-def test_a_trajectory_stamped_in_the_past_is_counted_late(stepped: Rig) -> None:
-    """Stamped 1 ms before the sim time it arrives at: applied from now (its earlier knots dropped), and
-    counted on /diagnostics as late, not silently."""
+def test_a_trajectory_stamped_in_the_past_is_counted_late_and_never_joined_with_a_jump(stepped: Rig) -> None:
+    """Stamped 1 ms before the sim time it arrives at: counted on /diagnostics as late, not silently. Where
+    the stroke in force is where the trajectory itself is now (here both at rest) it applies from now, its
+    earlier knots dropped; where joining it mid-way would jump the stroke (4 µm and 4 mm/s here: the surface would be
+    thrown), it is refused with that reason."""
     stepped.step(3)
-    stepped.send_trajectory(hold_message(0.002, [0.0, 0.010], [0.0, 40e-6]))
+    stepped.send_trajectory(hold_message(0.002, [0.0, 0.010], [0.0, 0.0]))       # at rest as the stroke is
     assert stepped.sim.commands.late == 1 and stepped.sim.rejected == 0
     assert dict((v.key, v.value) for v in stepped.sim.diagnostics().values)['commands_late'] == '1'
+    stepped.send_trajectory(hold_message(0.002, [0.0, 0.010], [0.0, 40e-6]))     # 4 µm up by now: a jump
+    assert stepped.sim.commands.late == 2 and stepped.sim.rejected == 1
+    assert 'would jump joint 0 by 4 µm' in stepped.sim.last_rejection, stepped.sim.last_rejection
     stepped.send_trajectory(hold_message(0.004, [0.0, 0.010], [0.0, 40e-6]))     # in the future: on time
-    assert stepped.sim.commands.late == 1
+    assert stepped.sim.commands.late == 2 and stepped.sim.rejected == 1
 
 
 def _bad_trajectories() -> dict[str, JointTrajectory]:

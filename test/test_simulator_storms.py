@@ -10,7 +10,17 @@ with other work the flood sender and the simulator starve each other whatever th
 was seen at load 3.2 on 2 cores), so there the test reports the figures and skips the rate check; the
 counting, acknowledging and logging checks always apply. Before the intake was bounded a 5 kHz flood
 cut the rate to 66-536 states/s (7-54 %); a CI machine at load 1.2 on 2 cores kept 699 of 998 (70 %)
-under the valid-trajectory flood, hence the 60 % assertion."""
+under the valid-trajectory flood, hence the 60 % assertion.
+
+Delivery: the simulator keeps up to ``COMMAND_QUEUE`` (1000) messages in its subscriptions' history while its
+executor is busy; a simulator starved of CPU for longer during a 5 kHz flood loses the oldest ones there,
+before it sees them (keep-last history; Fast DDS reports no loss for it). So the test asserts what holds
+under any load: at least the last ``COMMAND_QUEUE`` of a flood arrive, every message that arrives is
+counted once the counters settle (no backlog left behind), and each one is accounted for (a NaN set-point
+refused, a valid trajectory never refused, nothing dropped from the byte-bounded queue). It used to
+wait for every message sent, which timed out under load: 1681 of 25,000 NaN set-points never arrived with
+other work on the machine (load 4), 947 with four busy loops (load 10) even from a publisher history deep
+enough to hold them all (so in the simulator's history), none on an idle machine."""
 
 from __future__ import annotations
 
@@ -39,6 +49,8 @@ MIN_RATE = 950.0        # states per wall second: the target, printed with the f
 HELD = 0.6              # asserted: the loop keeps this share of its rate without commands (the bug: 7-54 %)
 UNLOADED = 990.0        # states per wall second without commands: the machine can hold 1 kHz
 MAX_LOG_LINES = 50
+COMMAND_QUEUE = 1000    # the simulator's subscription depth (nodes/simulator.py): what a starved simulator keeps
+SETTLE_S = 30.0         # s for the counters to settle after a flood (measured under load: < 3 s)
 
 
 class Storm:
@@ -76,6 +88,15 @@ class Storm:
             self.executor.spin_once(timeout_sec=0.0001)
         return sent, self.rate(first + 1, len(self.diag))      # the first report covers time before the flood
 
+    def settle(self, since: float) -> float:
+        """Wait until two reports made after wall time ``since`` give the same ``commands_received`` (the
+        simulator took everything its subscriptions held: the reports come from the same executor, after
+        the messages queued before them); returns the seconds it took."""
+        def settled() -> bool:
+            after = [d['commands_received'] for t, d in self.diag if t > since]
+            return len(after) >= 2 and after[-1] == after[-2]
+        return wait_until(settled, SETTLE_S, executor=self.executor, what='the command counters to settle')
+
     def rate(self, first: int, end: int | None = None) -> float:
         """Mean ``publish_rate_achieved`` of the reports ``first`` to ``end`` (at least two)."""
         wait_until(lambda: len(self.diag) >= first + 2, 5, executor=self.executor, what='/diagnostics reports')
@@ -112,20 +133,28 @@ def test_command_storms_do_not_sink_the_loop(ros_context: Context) -> None:
         figures.append(f'without commands: {quiet:.1f} states/s')
         sent, rate = storm.flood('actuator/trajectory', _ramp)
         rates = [rate]
-        figures.append(f'valid trajectories: {sent} sent, {rate:.1f} states/s')
-        wait_until(lambda: storm.counter('commands_received') == sent, 10, executor=storm.executor,
-                   what='every trajectory received')
-        assert storm.counter('rejected_commands') == 0
+        waited = storm.settle(time.monotonic())
+        received = storm.counter('commands_received')
+        figures.append(f'valid trajectories: {sent} sent, {received} received (settled in {waited:.1f} s), '
+                       f'{rate:.1f} states/s')
+        assert min(sent, COMMAND_QUEUE) <= received <= sent
+        assert storm.counter('rejected_commands') == 0 and storm.counter('commands_dropped') == 0
         coalesced = storm.counter('commands_coalesced')
+        assert coalesced < received
         nan = Float64MultiArray(data=[math.nan])
         sent_nan, rate = storm.flood('actuator/command', lambda _i: nan)
         rates.append(rate)
-        figures.append(f'NaN set-points: {sent_nan} sent, {rate:.1f} states/s')
-        wait_until(lambda: storm.counter('rejected_commands') == sent_nan, 10, executor=storm.executor,
-                   what='every NaN set-point refused and counted')
+        waited = storm.settle(time.monotonic())
+        received_nan = storm.counter('commands_received') - received
+        figures.append(f'NaN set-points: {sent_nan} sent, {received_nan} received (settled in {waited:.1f} s), '
+                       f'{rate:.1f} states/s')
+        assert min(sent_nan, COMMAND_QUEUE) <= received_nan <= sent_nan
+        wait_until(lambda: storm.counter('rejected_commands') == received_nan, 10, executor=storm.executor,
+                   what='every NaN set-point received refused and counted')
+        assert storm.counter('commands_coalesced') == coalesced      # an invalid command supersedes nothing
         first, sent_at = len(storm.diag), time.monotonic()
         storm.pubs['actuator/trajectory'].publish(huge)
-        wait_until(lambda: storm.counter('rejected_commands') == sent_nan + 1, 60, executor=storm.executor,
+        wait_until(lambda: storm.counter('rejected_commands') == received_nan + 1, 60, executor=storm.executor,
                    what='the 1,000,000-point trajectory refused')
         spin_for(storm.executor, FLOOD_S - (time.monotonic() - sent_at))    # the same 5 s window as a flood
         rate = storm.rate(first, len(storm.diag))

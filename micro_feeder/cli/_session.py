@@ -61,6 +61,7 @@ class RosSession:
         self.nodes: list[Any] = []
         self.recorder = None
         self.log: str | None = None
+        self._executor: Any = None
         if record:
             from rclpy.parameter import Parameter
 
@@ -85,27 +86,40 @@ class RosSession:
         return node
 
     def spin(self, done: Callable[[], bool], future: Any = None) -> None:
-        """Spin every node in one EventsExecutor until ``done()`` or Ctrl-C/SIGTERM; ``future`` (an rclpy
-        Future) completing ends the spin too, without waiting for the next check of ``done()``."""
+        """Spin every node in the session's EventsExecutor until ``done()`` or Ctrl-C/SIGTERM; ``future`` (an
+        rclpy Future) completing ends the spin too, without waiting for the next check of ``done()``. One
+        executor for the whole session: a message that arrived but was not yet taken when an executor was
+        shut down never reached its callback in the next one (the receipt of ``run``'s burst, published as
+        its wait for the burst ended, was missing from the log in 4 of 6 runs)."""
         from rclpy.experimental import EventsExecutor
 
         from ..nodes._ros import spin_until
         from ._foxglove import announce
-        executor = EventsExecutor(context=self.context)
+        if self._executor is None:
+            self._executor = EventsExecutor(context=self.context)
         for node in self.nodes:
-            executor.add_node(node)
+            if node not in self._executor.get_nodes():
+                self._executor.add_node(node)
         announce(self.viewer)
-        try:
-            spin_until(executor, lambda: bool(self.stop) or done() or (future is not None and future.done()),
-                       future)
-        finally:
-            executor.shutdown()
+        spin_until(self._executor, lambda: bool(self.stop) or done() or (future is not None and future.done()),
+                   future)
+
+    def shutdown(self) -> None:
+        """Shut the session's executor down (before its nodes are destroyed)."""
+        if self._executor is not None:
+            self._executor.shutdown()
+            self._executor = None
 
     def close_log(self) -> str | None:
         """Finish the recording (summary, metadata.yaml); returns its path."""
         if self.recorder is not None and self.log is None:
             self.log = str(self.recorder.close())
         return self.log
+
+    def recording_fate(self) -> str:
+        """'' when the recording ran to its end, else where and why it stopped (``recording stopped at
+        9.4 s: No space left on device (log readable up to 8.9 s)``)."""
+        return self.recorder.fate() if self.recorder is not None else ''
 
 
 @contextlib.contextmanager
@@ -137,6 +151,7 @@ def ros_session(record: str | None = None, namespace: str = '/', viewer: Any = N
     finally:
         if session is not None:
             session.close_log()
+            session.shutdown()
             for node in session.nodes:
                 node.destroy_node()
         rclpy.shutdown(context=context)

@@ -61,14 +61,17 @@ def run(args: argparse.Namespace) -> int:
         wall = time.perf_counter() - start
         sim.pause()     # the loop thread no longer advances the state the outcome reads
         result = outcome(sim, controller, wall, session.close_log())
+        fate = session.recording_fate()
+        if fate:
+            result['recording'] = fate     # the recording stopped early: where and why
     if args.json:
         print(json.dumps(result))
     else:
         print(controller.status_text() if controller.done else
               f'not finished after {sim.stepper.t:.6f} s sim time: {controller.status_text()}')
         print(f'sim time {result["sim_time_s"]:.6f} s in {wall:.2f} s wall; final mode {result["final_mode"]}'
-              + (f'; log {result["log"]}' if result['log'] else ''))
-    return 0 if result['reached'] else 1
+              + (f'; log {result["log"]}' if result['log'] else '') + (f': {fate}' if fate else ''))
+    return 0 if result['reached'] and not fate else 1
 
 
 def outcome(sim: Any, controller: Any, wall_s: float, log: str | None) -> dict[str, Any]:

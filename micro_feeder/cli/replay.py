@@ -6,10 +6,12 @@ import argparse
 import math
 import os
 import re
+import signal
 
 from . import CommandError, ros_done
 from ._foxglove import add_foxglove_option, announce, live_view
 
+DEFAULT_WAIT_TIMEOUT = 30.0  # s (the replay node's wait_for_subscribers_timeout default)
 _NAME = re.compile(r'[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*')
 
 
@@ -29,8 +31,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              'best effort, as rosbag2 does; the recorded /clock is then not replayed')
     parser.add_argument('--delay', type=float, default=0.0, metavar='S', help='wait S seconds before the first message')
     parser.add_argument('--wait-for-subscribers', action='store_true',
-                        help='before the first message, wait until every replayed topic has a subscriber '
-                             '(so a subscriber in another process misses nothing)')
+                        help='before the first message, wait for a subscriber on every --topic given (without '
+                             '--topic: on any topic of the log), so that a subscriber in another process misses '
+                             'nothing; at most --wait-timeout')
+    parser.add_argument('--wait-timeout', type=float, default=DEFAULT_WAIT_TIMEOUT, metavar='S',
+                        help='--wait-for-subscribers gives up after S seconds, names the topics without a '
+                             f'subscriber and exits with status 1 (default {DEFAULT_WAIT_TIMEOUT:g})')
     parser.add_argument('--start-paused', action='store_true',
                         help='start paused; the replay/pause service (std_srvs/SetBool, false) resumes')
     parser.add_argument('--playback-duration', type=float, default=0.0, metavar='S',
@@ -50,7 +56,8 @@ def _check(args: argparse.Namespace) -> None:
     if not 0.01 <= args.rate <= 100.0:
         raise CommandError(f'--rate {args.rate}: must be within [0.01, 100]')
     for option, value, high in (('--start-offset', args.start_offset, 1e9), ('--delay', args.delay, 3600.0),
-                                ('--playback-duration', args.playback_duration, 1e9)):
+                                ('--playback-duration', args.playback_duration, 1e9),
+                                ('--wait-timeout', args.wait_timeout, 86400.0)):
         if not (math.isfinite(value) and 0.0 <= value <= high):
             raise CommandError(f'{option} {value}: must be within [0, {high:g}] s')
     if args.namespace is not None and not _NAME.fullmatch(args.namespace.strip('/')):
@@ -77,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
                 '-p', f'start_offset:={args.start_offset}', '-p', f'topics:={strings(args.topics)}',
                 '-p', f'remap:={strings(args.remap)}', '-p', f'publish_clock:={flag(args.clock)}',
                 '-p', f'delay:={args.delay}', '-p', f'wait_for_subscribers:={flag(args.wait_for_subscribers)}',
+                '-p', f'wait_for_subscribers_timeout:={args.wait_timeout}',
                 '-p', f'start_paused:={flag(args.start_paused)}', '-p', f'playback_duration:={args.playback_duration}']
     if args.qos_profile_overrides_path:
         ros_args += ['-p', f'qos_profile_overrides_path:={args.qos_profile_overrides_path}']
@@ -86,11 +94,19 @@ def run(args: argparse.Namespace) -> int:
     try:
         with live_view(args.foxglove) as viewer:
             if viewer is None:
-                return replay_main(argv)
+                return _status(replay_main(argv))
 
             def tap(node: object) -> None:
                 viewer.tap(node)
                 announce(viewer)
-            return replay_main(argv, tap=tap)
+            return _status(replay_main(argv, tap=tap))
     finally:
         ros_done()      # the player shut its rclpy context down: the console script leaves at once
+
+
+def _status(status: int) -> int:
+    """The replay node's exit status, Ctrl-C (its 130) reported as every command reports it (``micro-feeder
+    replay: interrupted``, status 130: cli.main)."""
+    if status == 128 + signal.SIGINT:
+        raise KeyboardInterrupt
+    return status

@@ -2,7 +2,9 @@
 
 ROS traffic stays on this host unless ``ROS_AUTOMATIC_DISCOVERY_RANGE`` is already set. The nodes share
 one EventsExecutor on the main thread; a live status line goes to stderr (when it is a terminal) and a
-summary to stdout at the end. Ctrl-C (or SIGTERM) ends the run cleanly, the log included.
+summary to stdout at the end. Ctrl-C (or SIGTERM) ends the run cleanly, the log included. A recording that
+fails (disk full, log directory removed, storage not responding) stops with one error line and the run
+goes on; its summary says where the log ends and why, and the exit status is then 1.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from ._session import add_namespace_option, namespace, ros_session, validate
 
 STATUS_PERIOD = 0.2   # s (wall clock) between two status line updates
 READY_TIMEOUT = 10.0  # s (wall clock) the run waits at t = 0 for its actuator and recorder
+READY_POLL = 0.002    # s (wall clock) between two checks of what the run waits for at t = 0
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -47,8 +50,8 @@ def status_line(sim: Any) -> str:
             f'RTF {sim.achieved_rtf:.2f}')
 
 
-def summary(sim: Any, actuator: Any, wall_s: float, log: str | None) -> str:
-    """What the run did, for stdout."""
+def summary(sim: Any, actuator: Any, wall_s: float, log: str | None, fate: str = '') -> str:
+    """What the run did, for stdout; ``fate``: how the recording ended when it stopped early."""
     state = sim.stepper.state
     lines = [f'sim time        {state.t:.6f} s in {wall_s:.2f} s wall (real-time factor {state.t / wall_s:.3f})',
              f'part            {state.mode} at x = {state.x * 1e3:.6f} mm, moved {state.distance * 1e6:+.3f} um, '
@@ -59,31 +62,60 @@ def summary(sim: Any, actuator: Any, wall_s: float, log: str | None) -> str:
     if sim.error:
         lines.append(f'error           {sim.error}')
     if log:
-        lines.append(f'log             {log}')
+        lines.append(f'log             {log}' + (f': {fate}' if fate else ''))
     return '\n'.join(lines)
 
 
 def _wait_until_ready(session: Any, sim: Any, actuator: Any, whole_burst: bool) -> None:
     """Spin (sim time held at 0) until the simulator hears the actuator, the recorder (if any) hears every
     simulator topic and the actuator's command, and a whole burst has reached the simulator; at most
-    :data:`READY_TIMEOUT` s of wall time, then start anyway and say what is missing."""
+    :data:`READY_TIMEOUT` s of wall time, then start anyway and say what is missing. The actuator (built
+    without ``auto_start``) sends its burst here, once every subscriber is matched: its own auto-start sends
+    it when the simulator alone is, and it polled only every 50 ms."""
+    from rclpy.clock import Clock, ClockType
+    from rclpy.task import Future
+
     recording = session.recorder is not None
 
-    def missing() -> list[str]:
+    def listening() -> list[str]:
         out = []
         if actuator.trajectory_subscribers() < 1 + recording:
             out.append('the simulator' + (' and the recorder' if recording else '') + ' on actuator/trajectory')
         if recording and not sim.outputs_matched():
             out.append('the recorder on the simulator\'s topics')
+        return out
+
+    def missing() -> list[str]:
+        out = listening()
         if whole_burst and sim.commands.received < 1:
             out.append('the actuator\'s burst at the simulator')
         return out
 
     deadline = time.monotonic() + READY_TIMEOUT
-    session.spin(lambda: not missing() or time.monotonic() > deadline)
+    ready = Future()
+    started = []
+
+    def start() -> None:
+        if not started:
+            started.append(True)
+            actuator.get_logger().info(actuator.start())
+
+    # checked by a timer that ends the spin at once (the spin's own checks come every 0.1 s: that held the run
+    # at t = 0, and its log after the first pose, up to 100 ms longer than needed)
+    def check() -> None:
+        if not listening():
+            start()
+        if not ready.done() and (not missing() or time.monotonic() > deadline):
+            ready.set_result(True)
+
+    timer = sim.create_timer(READY_POLL, check, clock=Clock(clock_type=ClockType.STEADY_TIME))
+    session.spin(ready.done, ready)
+    sim.destroy_timer(timer)
     if missing() and not session.stop:
         print(f'micro-feeder run: started after {READY_TIMEOUT:g} s without {"; ".join(missing())}',
               file=sys.stderr)
+    if not session.stop:
+        start()
 
 
 def run(args: argparse.Namespace) -> int:
@@ -104,7 +136,8 @@ def run(args: argparse.Namespace) -> int:
                                             overrides={**model_flat, 'real_time_factor': args.real_time_factor},
                                             hold=True))
         end = sim.stop_at(args.duration) if args.duration is not None else None   # before the actuator is built
-        actuator = session.add(lambda: Actuator(context=session.context, namespace=ns, overrides=flat))
+        actuator = session.add(lambda: Actuator(context=session.context, namespace=ns,
+                                                overrides={**flat, 'auto_start': False}))   # started when ready
         _wait_until_ready(session, sim, actuator, whole_burst=actuator.sends_whole_burst())
         sim.resume()
         tty: TextIO | None = sys.stderr if sys.stderr.isatty() else None
@@ -116,5 +149,7 @@ def run(args: argparse.Namespace) -> int:
         sim.pause()     # the loop thread no longer advances the state the summary reads
         if tty is not None:
             print('\r' + status_line(sim), file=tty)
-        print(summary(sim, actuator, wall, session.close_log()))
-        return 1 if sim.error else 0
+        log = session.close_log()
+        fate = session.recording_fate()
+        print(summary(sim, actuator, wall, log, fate))
+        return 1 if sim.error or fate else 0

@@ -9,9 +9,25 @@ from ..physics.dynamics import MODES, TRANSITION_KINDS
 FEEDER_FRAME = 'feeder'     # x along the feeder, z up, y to the left
 CONTACT_FRAME = 'contact'   # at the part: x along the surface tangent, z along its normal
 
-__all__ = ['CONTACT_FRAME', 'FEEDER_FRAME', 'MODES', 'TRANSITION_KINDS', 'joint_names']
+__all__ = ['CONTACT_FRAME', 'FEEDER_FRAME', 'MODES', 'TRANSITION_KINDS', 'joint_names', 'receipt_frame',
+           'split_receipt_frame']
 
 
 def joint_names(n_actuators: int) -> list[str]:
     """The actuator joint names ``piezo_0`` ... in actuator order."""
     return [f'piezo_{k}' for k in range(n_actuators)]
+
+
+RECEIPT_ID_SEPARATOR = '#'
+
+
+def receipt_frame(topic: str, command_id: str = '') -> str:
+    """The ``frame_id`` of a command receipt: the command's topic, then ``#`` and the command's identity (its
+    JointTrajectory's ``header.frame_id``) when it has one: ``actuator/trajectory#/actuator:b1:w3``."""
+    return f'{topic}{RECEIPT_ID_SEPARATOR}{command_id}' if command_id else topic
+
+
+def split_receipt_frame(frame_id: str) -> tuple[str, str]:
+    """(topic, command identity or '') of a receipt's ``frame_id`` (:func:`receipt_frame`)."""
+    topic, _, command_id = frame_id.partition(RECEIPT_ID_SEPARATOR)
+    return topic, command_id

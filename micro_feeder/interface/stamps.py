@@ -52,6 +52,20 @@ def header_stamp(data: bytes) -> float:
     return sec + nanosec * 1e-9
 
 
+def header_frame_id(data: bytes) -> str:
+    """``header.frame_id`` of a serialized little-endian message that starts with a Header, read without
+    deserializing the rest; '' when absent, cut short or not UTF-8."""
+    if len(data) < 16 or data[1] != 1:
+        return ''
+    (length,) = struct.unpack_from('<I', data, 12)
+    if length <= 1 or 16 + length > len(data):
+        return ''
+    try:
+        return data[16:15 + length].decode()
+    except UnicodeDecodeError:
+        return ''
+
+
 def header_stamp_ns(data: bytes) -> int:
     """``header.stamp`` [ns] of a CDR message whose first field is a ``std_msgs/Header`` (negative as 0)."""
     fmt = '<iI' if data[1] == 1 else '>iI'  # encapsulation: 0x0001 = little-endian CDR

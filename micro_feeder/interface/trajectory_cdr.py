@@ -35,15 +35,15 @@ def point_bytes(n_joints: int) -> int:
 
 
 def encode(names: Sequence[str], offsets_ns: np.ndarray, positions: np.ndarray, velocities: np.ndarray,
-           accelerations: np.ndarray, stamp: Time) -> bytes:
-    """The serialized JointTrajectory (header stamp, empty frame_id, ``names``) with knots at
+           accelerations: np.ndarray, stamp: Time, command_id: str = '') -> bytes:
+    """The serialized JointTrajectory (header stamp, ``command_id`` as the header's frame_id, ``names``) with knots at
     ``offsets_ns`` (whole ns from the stamp) and (points, joints) positions (m), velocities (m/s),
     accelerations (m/s²); a publisher sends it as it is (``publish(bytes)``). At least one joint."""
     n_points, n = np.shape(positions)
     if not n:
         raise ValueError('trajectory_cdr.encode: at least one joint')
     head = bytearray(STAMP.pack(stamp.sec, stamp.nanosec))
-    put_string(head, '')                                                    # frame_id
+    put_string(head, command_id)                                            # frame_id
     put_uint32(head, len(names))
     for name in names:
         put_string(head, name)
@@ -68,6 +68,7 @@ class Decoded:
     names: list[str]
     n_points: int
     records: np.ndarray | None
+    frame_id: str = ''
 
 
 def decode(data: bytes, max_points: int) -> Decoded | None:
@@ -78,6 +79,7 @@ def decode(data: bytes, max_points: int) -> Decoded | None:
     body = memoryview(data)[4:]
     try:
         sec, nanosec, length = struct.unpack_from('<iII', body, 0)
+        frame_id = bytes(body[12:11 + length]).decode() if length else ''
         p = 12 + length
         p += -p % 4
         (count,) = struct.unpack_from('<I', body, p)
@@ -97,13 +99,13 @@ def decode(data: bytes, max_points: int) -> Decoded | None:
         return None
     stamp = sec + nanosec * 1e-9
     if n_points == 0 or n_points > max_points or p + 4 > len(body):
-        return Decoded(stamp, names, n_points, None)
+        return Decoded(stamp, names, n_points, None, frame_id)
     (n,) = struct.unpack_from('<I', body, p)
     dtype = _record(n)
     pad = 4 if p % 8 == 0 else 0
     end = p + pad + n_points * dtype.itemsize
     if n == 0 or not 0 <= len(body) - end < 8:         # rclpy pads the payload's end
-        return Decoded(stamp, names, n_points, None)
+        return Decoded(stamp, names, n_points, None, frame_id)
     if pad:                       # the first point is split by the padding: join it, then the rest as they are
         records = np.empty(n_points, dtype=dtype)
         records[:1] = np.frombuffer(bytes(body[p:p + 4]) + bytes(body[p + 4 + pad:p + pad + dtype.itemsize]),
@@ -114,4 +116,4 @@ def decode(data: bytes, max_points: int) -> Decoded | None:
     records.flags.writeable = False   # read-only either way, whatever the names' lengths made the padding
     fixed = (np.all(records['n_pos'] == n) and np.all(records['n_vel'] == n) and np.all(records['n_acc'] == n)
              and not np.any(records['n_effort']))
-    return Decoded(stamp, names, n_points, records if fixed else None)
+    return Decoded(stamp, names, n_points, records if fixed else None, frame_id)

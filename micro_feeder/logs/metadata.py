@@ -160,3 +160,15 @@ def read_file_list(directory: Path) -> list[Path] | None:
         raise LogFormatError(f'{path} is not rosbag2 metadata (no rosbag2_bagfile_information with '
                              'relative_file_paths): not a log')
     return [directory / Path(p).name for p in files]
+
+
+def read_custom_data(directory: Path) -> dict[str, str]:
+    """The ``custom_data`` of a directory's ``metadata.yaml`` (the recorder's counters, and why a recording
+    stopped early); {} when it has none or cannot be read."""
+    try:
+        document = yaml.safe_load((directory / METADATA_FILE).read_text())
+    except (OSError, yaml.YAMLError, UnicodeDecodeError):
+        return {}
+    info = document.get('rosbag2_bagfile_information') if isinstance(document, dict) else None
+    custom = info.get('custom_data') if isinstance(info, dict) else None
+    return {str(k): str(v) for k, v in custom.items()} if isinstance(custom, dict) else {}

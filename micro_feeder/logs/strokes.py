@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from ..interface.names import split_receipt_frame
 from ..interface.stamps import stamp_ns
 from ..physics.waveforms import StrokeSchedule, trajectory_table
 from .reader import LogReader
@@ -49,7 +50,7 @@ def commanded_strokes(log: LogReader, n_actuators: int, pose_log_t: np.ndarray, 
     receipts: dict[str, list[float]] = defaultdict(list)
     if log.resolve('simulator/command_receipts') is not None:
         for m in log.messages(['simulator/command_receipts']):
-            receipts[m.message.frame_id].append(stamp_ns(m.message.stamp) * 1e-9)
+            receipts[split_receipt_frame(m.message.frame_id)[0]].append(stamp_ns(m.message.stamp) * 1e-9)
     commands = []
     for topic in topics:
         for i, m in enumerate(log.messages([topic])):

@@ -2,7 +2,11 @@
 state, recorder loss counters.
 
 The loss counters come from the recorder: its ``micro_feeder.recorder`` metadata record on a clean stop,
-or, in a truncated log, the last of its ``/diagnostics`` messages that made it to disk (same keys).
+or, in a truncated log, the last of its ``/diagnostics`` messages that made it to disk (same keys). They
+count only what was lost after the recorder subscribed; what happened before (a recorder that joined late)
+is found from the log itself: a first pose later than one tick of sim time, and fewer commands than the
+simulator says it received (its ``simulator/command_receipts``, one per command, and the
+``commands_received`` of its ``/diagnostics``).
 """
 
 from __future__ import annotations
@@ -11,11 +15,15 @@ import datetime
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from .coverage import Coverage, end_line, missing_command_lines, stall_lines
 from .reader import LogReader
 from .sim_parameters import recorded_parameters, run_mode
 
 RECORDER_STATUS_PREFIX = 'recorder'
 RATE_MIN_COUNT = 10  # topics with fewer messages are events (commands, mode changes): no rate shown
+COMMAND_TOPICS = ('actuator/trajectory', 'actuator/command')
+DEFAULT_TICK = 2e-3  # s of sim time a tick can advance, without recorded parameters (1 kHz, real time)
+SIMULATOR_STATUS_SUFFIX = 'simulator: loop'
 
 
 @dataclass
@@ -53,6 +61,22 @@ class SimulatorRun:
 
 
 @dataclass
+class MissingStart:
+    """What the log lacks from before the recorder subscribed: ``first_pose`` [s], the sim time of the first
+    pose when it is later than one ``tick`` [s] of sim time (None otherwise); ``commands`` of the
+    ``commands_received`` the simulator received are in no way accounted for in the log (neither recorded
+    nor counted lost by the recorder): the first ones, sent before the recorder subscribed."""
+
+    tick: float = DEFAULT_TICK
+    first_pose: float | None = None
+    commands: int = 0
+    commands_received: int = 0
+
+    def __bool__(self) -> bool:
+        return self.first_pose is not None or self.commands > 0
+
+
+@dataclass
 class LogSummary:
     """Everything ``micro-feeder info`` shows."""
 
@@ -67,6 +91,7 @@ class LogSummary:
     simulator: SimulatorRun
     recorder: dict[str, str] = field(default_factory=dict)
     recorder_source: str = ''  # 'summary', 'diagnostics' or ''
+    start: MissingStart = field(default_factory=MissingStart)
 
     @property
     def message_count(self) -> int:
@@ -105,6 +130,48 @@ def simulator_run(log: LogReader) -> SimulatorRun:
     return run
 
 
+def tick_length(params: dict | None) -> float:
+    """The most sim time [s] one simulator tick advances: two loop periods × the real-time factor in real time
+    (what a tick after a late wake-up catches up), else one ``step_period``; :data:`DEFAULT_TICK` unknown."""
+    if params is None:
+        return DEFAULT_TICK
+    if run_mode(params) == 'real time':
+        return 2.0 * float(params.get('real_time_factor', 1.0)) / float(params.get('publish_rate', 1000.0))
+    return float(params.get('step_period', DEFAULT_TICK))
+
+
+def _commands_received(log: LogReader) -> int:
+    """Commands the simulator says it received: its receipts in the log, or the ``commands_received`` of
+    its last ``/diagnostics`` when that is more (a counter since its start); 0 with neither."""
+    receipts = log.resolve('simulator/command_receipts')
+    received = log.topics[receipts].count if receipts else 0
+    counts: dict[str, int] = {}
+    for m in log.messages(['/diagnostics'], decoded=True):
+        for status in m.message.status:
+            if status.name.endswith(SIMULATOR_STATUS_SUFFIX):
+                value = next((kv.value for kv in status.values if kv.key == 'commands_received'), None)
+                if value is not None and value.isdigit():
+                    counts[status.name] = int(value)
+    if len(counts) == 1:        # several simulators on one log: their counters cannot be told apart here
+        received = max(received, *counts.values())
+    return received
+
+
+def missing_start(log: LogReader, part: PartState, recorder: dict[str, str]) -> MissingStart:
+    """What the log lacks from before the recorder subscribed (:class:`MissingStart`)."""
+    snapshots = recorded_parameters(log)
+    start = MissingStart(tick=tick_length(snapshots[0] if snapshots else None))
+    if part.first_stamp is not None and part.first_stamp > start.tick + 1e-9:
+        start.first_pose = part.first_stamp
+    start.commands_received = _commands_received(log)
+    held = lost = 0
+    for topic in filter(None, map(log.resolve, COMMAND_TOPICS)):
+        held += log.topics[topic].count
+        lost += int(recorder.get(f'lost.{topic}', 0))
+    start.commands = max(start.commands_received - held - lost, 0)
+    return start
+
+
 def summarize(log: LogReader) -> LogSummary:
     """Summarise an opened log (reads the last pose/contact state and, when needed, the diagnostics)."""
     rows = [TopicRow(t.name, t.type, t.count, _rate(log, t.name, t.count))
@@ -121,7 +188,8 @@ def summarize(log: LogReader) -> LogSummary:
         part.mode = state.message.data
     counters, source = recorder_counters(log)
     return LogSummary(log.path, log.files, sum(f.stat().st_size for f in log.files), log.truncated,
-                      log.start_ns, log.duration, rows, part, simulator_run(log), counters, source)
+                      log.start_ns, log.duration, rows, part, simulator_run(log), counters, source,
+                      missing_start(log, part, counters))
 
 
 def _size(n: int) -> str:
@@ -132,22 +200,44 @@ def _size(n: int) -> str:
     return f'{n} B'
 
 
-def _loss_lines(s: LogSummary) -> list[str]:
+def _loss_lines(s: LogSummary, coverage: Coverage | None = None) -> list[str]:
+    """The recorder's loss counters, then what they cannot see (:func:`_start_lines`); with ``coverage``, a
+    log that ends early says its counts stop there."""
+    ends_early = coverage is not None and coverage.end.kind != 'complete'
     if not s.recorder:
-        return ['loss       unknown (no recorder counters in this log)']
+        return ['loss       unknown (no recorder counters in this log)', *_start_lines(s.start, coverage)]
     c = s.recorder
     lost, incompatible = int(c.get('lost_total', 0)), int(c.get('incompatible_qos_total', 0))
     where = 'final summary' if s.recorder_source == 'summary' else 'last recorder diagnostics'
-    verdict = 'none' if lost == 0 and incompatible == 0 else f'{lost} messages lost'
+    missing = s.start or (coverage is not None and coverage.commands) or ends_early
+    verdict = f'{lost} messages lost' if lost or incompatible else 'none while recording' if missing else 'none'
     lines = [f'loss       {verdict}  (received {int(c.get("received_total", 0)):,}; QoS message-lost events '
              f'{lost}, incompatible-QoS events {incompatible}; from the {where})']
     per_topic = {k.split('.', 1)[1]: v for k, v in c.items() if k.startswith('lost.') and v != '0'}
     lines += [f'           {topic}: {n} lost' for topic, n in sorted(per_topic.items())]
+    if ends_early:
+        lines.append('           counted only up to where the log ends (ends, above): nothing after that is counted')
+    return lines + _start_lines(s.start, coverage)
+
+
+def _start_lines(start: MissingStart, coverage: Coverage | None = None) -> list[str]:
+    """What the recorder's counters cannot see: what happened before it subscribed, and (with ``coverage``)
+    the commands it lacks against the simulator's receipts, per command topic, instead of their total."""
+    lines = []
+    if start.first_pose is not None:
+        lines.append(f'           start missing: first pose at sim time {start.first_pose:.6f} s, not 0 (one tick '
+                     f'is at most {start.tick * 1e3:g} ms): the recorder joined late')
+    if coverage is not None and coverage.commands:
+        lines += [f'           {line}' for line in missing_command_lines(coverage)]
+    elif start.commands:
+        lines.append(f'           start missing: the first {start.commands} of the {start.commands_received} '
+                     'commands the simulator received are not in the log (sent before the recorder subscribed)')
     return lines
 
 
-def format_summary(s: LogSummary) -> str:
-    """The summary as aligned text for a terminal."""
+def format_summary(s: LogSummary, coverage: Coverage | None = None) -> str:
+    """The summary as aligned text for a terminal; with ``coverage`` (:func:`.coverage.coverage`), also
+    where and why the log ends, the sim time each topic starts at, and what the log lacks of the run."""
     start = datetime.datetime.fromtimestamp(s.start_ns * 1e-9).isoformat(sep=' ', timespec='milliseconds')
     lines = [
         f'log        {s.path}',
@@ -156,17 +246,24 @@ def format_summary(s: LogSummary) -> str:
         f'duration   {s.duration:.3f} s',
         f'messages   {s.message_count:,}',
     ]
+    if coverage is not None and end_line(coverage):
+        lines.append(end_line(coverage))
     for path in s.truncated:
         lines.append(f'WARNING    {path.name} is truncated (recorder did not stop cleanly); read up to its '
                      'last whole chunk. "micro-feeder recover" rewrites it as a complete log.')
     lines.append('')
+    starts = coverage.starts if coverage is not None else {}
     wname = max([len('topic'), *(len(t.name) for t in s.topics)])
     wtype = max([len('type'), *(len(t.type) for t in s.topics)])
-    lines.append(f'{"topic":<{wname}}  {"type":<{wtype}}  {"count":>9}  {"rate":>10}')
+    lines.append(f'{"topic":<{wname}}  {"type":<{wtype}}  {"count":>9}  {"rate":>10}'
+                 + (f'  {"from (sim)":>12}' if starts else ''))
     lines += [f'{t.name:<{wname}}  {t.type:<{wtype}}  {t.count:>9,}  '
-              + (f'{t.rate:>7.1f} Hz' if t.rate is not None else f'{"–":>10}') for t in s.topics]
+              + (f'{t.rate:>7.1f} Hz' if t.rate is not None else f'{"–":>10}')
+              + (f'  {starts.get(t.name, "–")!s:>12}' if starts else '') for t in s.topics]
     lines.append('')
     lines += _simulator_lines(s)
+    if coverage is not None:
+        lines += stall_lines(coverage)
     p = s.part
     if p.x is None and p.mode is None:
         lines.append('part       no particle/pose or particle/contact_state in this log')
@@ -176,12 +273,13 @@ def format_summary(s: LogSummary) -> str:
         lines.append(f'part       {where}; mode {p.mode or "unknown"}')
         if p.x is not None and p.first_x is not None:
             lines.append(f'           moved {(p.x - p.first_x) * 1e6:+.3f} µm since t = {p.first_stamp:.4f} s')
-    lines += _loss_lines(s)
+    lines += _loss_lines(s, coverage)
     return '\n'.join(lines)
 
 
 def _simulator_lines(s: LogSummary) -> list[str]:
-    """Sim time span (pose stamps) with the achieved real-time factor, and how the simulator was driven."""
+    """Sim time span (pose stamps) with the achieved real-time factor, and how the simulator was driven (the
+    commands it counted itself when the log holds fewer of its receipts)."""
     lines = []
     p = s.part
     if p.stamp is not None and p.first_stamp is not None:
@@ -195,6 +293,10 @@ def _simulator_lines(s: LogSummary) -> list[str]:
                'lockstep': f'lockstep, {run.step_period:g} s per simulator/step call or command',
                'real time': f'real time × {run.real_time_factor:g}',
                'as fast as possible': f'as fast as possible, {run.step_period:g} s per step'}.get(run.mode, run.mode)
-        n = run.commands_received
-        lines.append(f'simulator  {how}; {n} command{"s" * (n != 1)} received')
+        n, counted = run.commands_received, s.start.commands_received
+        if counted > n:     # its /diagnostics count from its start, the receipts only what was recorded
+            lines.append(f'simulator  {how}; {counted} command{"s" * (counted != 1)} received '
+                         f'(its /diagnostics), {n} of them acknowledged in the log')
+        else:
+            lines.append(f'simulator  {how}; {n} command{"s" * (n != 1)} received')
     return lines

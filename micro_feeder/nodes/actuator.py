@@ -19,6 +19,7 @@ burst's length.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Mapping
 from typing import Any
 
@@ -26,9 +27,11 @@ import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger
@@ -39,7 +42,7 @@ from ..interface.names import joint_names
 from ..physics.parameters import ParamSpec
 from ..physics.waveforms import StrokeParams
 from ..settings import model_specs
-from ..sim.stream import StrokeStream, encoded_window, points_per_message, sample_waveform
+from ..sim.stream import StrokeStream, encode_stop, encode_window, points_per_message, sample_waveform
 from ._ros import topic_qos
 from .parameters import check_changes, declare, values
 from .spin import spin_node
@@ -56,6 +59,9 @@ NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
     'stream.lead': (ParamSpec('a streamed burst is kept scheduled this far ahead of sim time', 's', gt=0, le=10.0),
                     0.2),
 }
+ACK_TIMEOUT_S = 1.0    # s an actuator that stops waits for its subscribers to acknowledge what it sent
+GRAPH_SETTLE_S = 0.5   # s the trajectory topic's subscriptions must stay the same before an auto start
+GRAPH_POLL_S = 0.05    # s between looks at which simulators the trajectory publisher reaches, while streaming
 COUNT_SPEC = ParamSpec('number of strokes in the burst; 0 = strokes until ~/stop (streamed)', kind='int', ge=0)
 
 
@@ -79,9 +85,20 @@ class Actuator(Node):
         self.stops = 0
         self.windows = 0
         self.underruns = 0
+        self.rephases = 0                            # streams re-phased after a reset, restart or stall
         self.sim_time: float | None = None           # latest sim time seen on actuator/joint_states (s)
         self._stream: StrokeStream | None = None
         self._pending_stream = False                 # streamed start waiting for the first sim time
+        self._instance = f'{self.get_fully_qualified_name()}@{time.time_ns():x}'   # names this run's commands
+        self._windows_in_burst = 0
+        self._graph_seen: frozenset[bytes] | None = None   # the trajectory subscriptions seen ready, and since when
+        self._graph_since = 0.0
+        self._joint_states: bytes | None = None      # the latest actuator/joint_states, serialized
+        self._simulators: frozenset[bytes] = frozenset()   # trajectory subscriptions of the simulators reached
+        self._matched = -1                           # trajectory subscriptions matched at the last look
+        self._graph_looked = 0.0                     # monotonic time of that look (s)
+        self._traj_topic = self._pub.topic_name
+        self._joint_states_topic = self.resolve_topic_name('actuator/joint_states')
         self._auto = self.create_timer(0.05, self._auto_start) if self.get_parameter('auto_start').value else None
         self.create_timer(1.0, self._publish_diagnostics)
         self._warm_up()
@@ -90,7 +107,7 @@ class Actuator(Node):
         """Build and encode one window of the configured strokes, unsent: the first call loads the compiled
         waveform code (0.2-0.7 s), which inside the first streamed window let sim time pass the strokes
         scheduled (an underrun at every start)."""
-        encoded_window(self._new_stream(0.0))
+        encode_window(self._new_stream(0.0).next_window())
 
     # -- the burst ------------------------------------------------------------------------------------
 
@@ -105,11 +122,13 @@ class Actuator(Node):
         streaming it. Returns a one-line description."""
         self._stream = None
         self.bursts += 1
+        self._windows_in_burst = 0
         knots = self._whole_burst_knots()
         if knots is not None:
             times, pos, vel, acc = knots
             n = pos.shape[1]
-            self._pub.publish(trajectory_cdr.encode(joint_names(n), np.round(times * 1e9), pos, vel, acc, Time()))
+            self._pub.publish(trajectory_cdr.encode(joint_names(n), np.round(times * 1e9), pos, vel, acc, Time(),
+                                                    self._command_id()))
             return f'burst sent: {times.size} knots on {n} joints, {times[-1]:.6g} s'
         self._pending_stream = True
         if self.sim_time is None:
@@ -130,6 +149,59 @@ class Actuator(Node):
     def sends_whole_burst(self) -> bool:
         """Whether :meth:`start` sends the configured burst as one message (else it streams it)."""
         return self._whole_burst_knots() is not None
+
+    def _command_id(self, window: int | None = None) -> str:
+        """The identity of a command this node sends (its trajectory's header.frame_id): node, process start,
+        burst and window, so that the simulator applies each once and the log and the receipts name it."""
+        return f'{self._instance}:b{self.bursts}' + (f':w{window}' if window is not None else '')
+
+    def _simulator_subscriptions(self) -> frozenset[bytes] | None:
+        """Endpoint ids of the ``actuator/trajectory`` subscriptions of simulators (nodes that also publish
+        ``actuator/joint_states``), when every discovered subscription is matched with this node's publisher
+        (what is sent now reaches them); None while some are discovered but not yet matched."""
+        subscriptions = self.get_subscriptions_info_by_topic(self._traj_topic)
+        if self._pub.get_subscription_count() < len(subscriptions):
+            return None
+        publishers = self.get_publishers_info_by_topic(self._joint_states_topic)
+        simulators = {(i.node_namespace, i.node_name) for i in publishers}
+        return frozenset(bytes(i.endpoint_gid) for i in subscriptions if (i.node_namespace, i.node_name) in simulators)
+
+    def simulator_ready(self) -> bool:
+        """True when a simulator (a node that subscribes to ``actuator/trajectory`` and publishes
+        ``actuator/joint_states``) is on the graph, every discovered subscription of the trajectory topic is
+        matched with this node's publisher, and the set of subscriptions has not changed for
+        :data:`GRAPH_SETTLE_S`: a burst sent now reaches the simulator, and a recorder discovered a moment
+        after it (which would miss the burst) has had time to appear. Another subscriber alone (a recorder, a
+        viewer) is not enough."""
+        ready = bool(self._simulator_subscriptions())
+        seen = frozenset(bytes(i.endpoint_gid) for i in self.get_subscriptions_info_by_topic(self._traj_topic)) \
+            if ready else None
+        now = time.monotonic()
+        if seen != self._graph_seen:
+            self._graph_seen, self._graph_since = seen, now
+        return ready and now - self._graph_since >= GRAPH_SETTLE_S
+
+    def _look_for_simulators(self) -> tuple[bool, bool]:
+        """(a simulator is reached, a new one appeared since the last look): looked up when the trajectory
+        publisher's matches change, and every :data:`GRAPH_POLL_S` while streaming. A new simulator (restarted,
+        or a second one) holds none of the strokes sent before it matched: the stream re-phases to it."""
+        matched, now = self._pub.get_subscription_count(), time.monotonic()
+        if matched == self._matched and now - self._graph_looked < GRAPH_POLL_S:
+            return bool(self._simulators), False
+        self._matched, self._graph_looked = matched, now
+        simulators = self._simulator_subscriptions()
+        if simulators is None:                       # one is discovered but not matched yet: wait for it
+            return False, False
+        new = bool(simulators - self._simulators)
+        self._simulators = simulators
+        return bool(simulators), new
+
+    def _held_strokes(self) -> np.ndarray | None:
+        """The strokes (m) the simulator reported last on ``actuator/joint_states``, or None."""
+        if self._joint_states is None:
+            return None
+        positions = np.asarray(deserialize_message(self._joint_states, JointState).position, dtype=float)
+        return positions if self._stream is not None and positions.size == self._stream.n_actuators else None
 
     def trajectory_subscribers(self) -> int:
         """Subscriptions matched on ``actuator/trajectory``."""
@@ -154,38 +226,71 @@ class Actuator(Node):
 
     def _start_stream(self, now: float) -> None:
         self._pending_stream = False
+        self._simulators = self._simulator_subscriptions() or frozenset()
         self._stream = self._new_stream(now + self.get_parameter('stream.lead').value)
         self._feed(now)
 
     def _feed(self, now: float) -> None:
-        """Send windows until ``stream.lead`` of strokes is scheduled ahead of sim time ``now``."""
+        """Send what keeps ``stream.lead`` of strokes scheduled ahead of sim time ``now``, re-phasing first when
+        sim time went back or passed the strokes (:meth:`StrokeStream.follow`); at a finite stream's end, a
+        stop stamped there, so the simulator knows the stream ended rather than fell silent."""
         stream = self._stream
-        lead = self.get_parameter('stream.lead').value
-        if stream.scheduled_until < now and stream.sent_ns > 0:
-            self.underruns += 1
-            self.get_logger().warning(f'stream underrun: sim time {now:.6f} s passed the strokes scheduled '
-                                      f'(until {stream.scheduled_until:.6f} s); raise stream.lead',
-                                      throttle_duration_sec=5.0)
-        while not stream.done and stream.scheduled_until < now + lead:
-            self._pub.publish(encoded_window(stream))
+        reached, new_simulator = self._look_for_simulators()
+        if not reached:                              # sent now, it would be lost: wait, re-phase when one is back
+            return
+        windows, why = stream.follow(now, self.get_parameter('stream.lead').value, self._held_strokes,
+                                     new_simulator=new_simulator)
+        if why is not None:
+            self.rephases += 1
+            self.underruns += 'passed the strokes' in why
+            self.get_logger().warning(f'stream re-phased: {why}', throttle_duration_sec=5.0)
+        for window in windows:
+            self._windows_in_burst += 1
+            self._pub.publish(encode_window(window, self._command_id(self._windows_in_burst)))
             self.windows += 1
         if stream.done:
             self._stream = None
+            self._pub.publish(encode_stop(stream.n_actuators, stream.scheduled_until,
+                                          self._command_id(self._windows_in_burst + 1)))
 
     def _on_sim_time(self, data: bytes) -> None:
         self.sim_time = stamps.header_stamp(data)
+        self._joint_states = data
         if self._pending_stream:
+            origin_ns = round((self.sim_time + self.get_parameter('stream.lead').value) * 1e9)  # _start_stream's
             self._start_stream(self.sim_time)
+            self.get_logger().info(f'burst streamed from t = {origin_ns * 1e-9:.9f} s (sim time)')
         elif self._stream is not None:
             self._feed(self.sim_time)
 
     # -- ROS callbacks --------------------------------------------------------------------------------
 
     def _auto_start(self) -> None:
-        if self._pub.get_subscription_count() > 0:
-            self.get_logger().info(self.start())
-            self.destroy_timer(self._auto)
-            self._auto = None
+        """Send the burst once, when the simulator is there (:meth:`simulator_ready`). The timer is gone after
+        the first start: a tick the executor had already queued finds ``_auto`` None and does nothing."""
+        if self._auto is None or not self.simulator_ready():
+            return
+        self.destroy_timer(self._auto)
+        self._auto = None
+        self.get_logger().info(self.start())
+
+    def destroy_node(self) -> None:
+        """Wait (up to :data:`ACK_TIMEOUT_S`) until every subscriber acknowledged what was sent, then destroy:
+        a reliable message not yet delivered to a slower subscriber (a recorder) dies with its publisher."""
+        self._pub.wait_for_all_acked(Duration(nanoseconds=round(ACK_TIMEOUT_S * 1e9)))
+        super().destroy_node()
+
+    def state(self) -> str:
+        """What the node is doing, in words: for /diagnostics and people."""
+        if self._auto is not None:
+            return 'waiting for the simulator (auto_start)'
+        if self._pending_stream:
+            return 'streaming: waiting for sim time on actuator/joint_states'
+        if self._stream is not None and not self._simulator_subscriptions():
+            return 'streaming: no simulator reached on actuator/trajectory, waiting for one'
+        if self._stream is not None:
+            return f'streaming, {self.rephases} re-phase(s)' if self.rephases else 'streaming'
+        return 'idle'
 
     def _on_start(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         response.success, response.message = True, self.start()
@@ -205,12 +310,12 @@ class Actuator(Node):
         return SetParametersResult(successful=reason is None, reason=reason or '')
 
     def _publish_diagnostics(self) -> None:
-        items = {'bursts_sent': self.bursts, 'stops_sent': self.stops, 'windows_sent': self.windows,
-                 'stream_underruns': self.underruns, 'streaming': self._stream is not None,
-                 'subscribers': self._pub.get_subscription_count()}
+        items = {'state': self.state(), 'bursts_sent': self.bursts, 'stops_sent': self.stops,
+                 'windows_sent': self.windows, 'stream_underruns': self.underruns, 'stream_rephases': self.rephases,
+                 'streaming': self._stream is not None, 'subscribers': self._pub.get_subscription_count()}
         status = DiagnosticStatus(name=f'{self.get_name()}: stroke', hardware_id='micro_feeder',
-                                  level=DiagnosticStatus.WARN if self.underruns else DiagnosticStatus.OK,
-                                  message='stream underruns' if self.underruns else 'ok',
+                                  level=DiagnosticStatus.WARN if self.rephases else DiagnosticStatus.OK,
+                                  message=items['state'],
                                   values=[KeyValue(key=k, value=str(v)) for k, v in items.items()])
         self._pub_diag.publish(DiagnosticArray(header=Header(stamp=self.get_clock().now().to_msg()),
                                                status=[status]))

@@ -11,6 +11,17 @@ Loss accounting: QoS message-lost and incompatible-QoS events, per topic, publis
 log summary on a clean stop. rclpy's EventsExecutor cannot deliver message info (sequence numbers) to
 a callback (``SystemError`` in rclpy 9.1.2), so gaps in a publisher's sequence are not counted.
 
+Faults never reach the executor. The log is written on a thread of its own (``logs.background``): a
+failed write (disk full, file too large, I/O error), a removed log directory, a write that does not return
+within ``write_timeout`` s or a disk that cannot keep up stop the recording: the log is kept up to its last
+whole chunk, finished there with where and why it ends (``logs.writer``), and the fault is reported once,
+as one ERROR line on the node's logger and on ``/diagnostics`` (level ERROR from then on). The node stays
+up (in ``micro-feeder run`` the simulation goes on); the ``recorder`` program ends with status 1 after
+printing the summary of what is readable. A recorder that did not run for more than ``STALL_REPORT`` s
+(its process stopped by SIGSTOP or a suspended machine, its executor busy elsewhere, starved of CPU) says so
+when it runs again: what was published meanwhile may be missing, and it is counted in the ``stalls`` keys of
+its counters.
+
 Use as a program (``recorder --ros-args -p output:=out/run1``: stops cleanly on SIGINT, SIGTERM or the
 ``~/stop`` service, ``/recorder/stop`` by default) or in-process: ``r = Recorder(context=ctx)``, add it to
 an executor that runs on the main thread, spin, then ``r.close()``.
@@ -37,16 +48,20 @@ from rclpy.task import Future
 from std_srvs.srv import Trigger
 
 from ..interface.topics import TOPICS, TOPICS_BY_NAME
+from ..logs.background import WRITE_TIMEOUT, BackgroundWriter
+from ..logs.coverage import coverage
 from ..logs.metadata import dump_qos
 from ..logs.reader import LogReader
 from ..logs.summary import format_summary, summarize
-from ..logs.writer import LogWriter
+from ..logs.writer import LogWriter, WriteFault
 from ._ros import SERVICE_QOS, message_class, qos_to_dict, spin_until, topic_qos
 from .spin import init_ros
 
 SUBSCRIPTION_DEPTH = 1000  # messages queued per topic while the writer is busy
 DIAGNOSTICS_PERIOD = 1.0  # s
 DISCOVERY_PERIOD = 1.0  # s
+WATCH_PERIOD = 0.25  # s between two looks at the writer thread (faults, stalls)
+STALL_REPORT = 2.0  # s: a longer gap between two looks means the recorder process itself was stopped
 
 
 def _descriptor(description: str, type_: int, *, float_range: tuple[float, float] | None = None,
@@ -89,16 +104,24 @@ class Recorder(Node):
         self.declare_parameter('split_duration', 0.0, _descriptor(
             'start a new file when the current one spans this long [s]; 0 = never',
             ParameterType.PARAMETER_DOUBLE, float_range=(0.0, 1e6)))
+        self.declare_parameter('write_timeout', WRITE_TIMEOUT, _descriptor(
+            'a write to the log that has not returned after this long [s] stops the recording '
+            '(storage not responding)', ParameterType.PARAMETER_DOUBLE, float_range=(0.5, 3600.0)))
         p = {name: self.get_parameter(name).value for name in
-             ('output', 'topics', 'flush_period', 'split_size', 'split_duration')}
+             ('output', 'topics', 'flush_period', 'split_size', 'split_duration', 'write_timeout')}
         output = p['output'] or datetime.datetime.now().strftime('rosbag2_%Y_%m_%d-%H_%M_%S')
-        self.writer = LogWriter(output, flush_period=p['flush_period'], split_size=p['split_size'],
-                                split_duration=p['split_duration'])
-        self.done = Future()
         self.received: Counter[str] = Counter()
         self.lost: Counter[str] = Counter()
         self.incompatible: Counter[str] = Counter()
+        self.stalls: list[tuple[int, float]] = []   # (wall-clock ns when it ended, seconds) per process stall
+        self.writer = LogWriter(output, flush_period=p['flush_period'], split_size=p['split_size'],
+                                split_duration=p['split_duration'], stop_on_error=True,
+                                stamp_topic=self.resolve_topic_name('particle/pose'), metadata=self.counters)
+        self._background = BackgroundWriter(self.writer, write_timeout=p['write_timeout'])
+        self.done = Future()
         self._closed = False
+        self._reported: set[str] = set()   # what was reported once: 'fault', 'error', skipped topics
+        self._last_watch: float | None = None   # monotonic time of the last look (None before the first spin)
         self._pending: dict[str, str] = {}  # absolute name -> configured name, type not known yet
         for name in p['topics']:
             absolute = self.resolve_topic_name(name)
@@ -109,7 +132,7 @@ class Recorder(Node):
                 self._subscribe(absolute, spec.type, topic_qos(name, SUBSCRIPTION_DEPTH))
         self._diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_timer(DIAGNOSTICS_PERIOD, self._publish_diagnostics)
-        self.create_timer(min(p['flush_period'] / 2, 0.25), self._flush_if_due)
+        self.create_timer(WATCH_PERIOD, self._watch)
         if self._pending:
             self.create_timer(DISCOVERY_PERIOD, self._discover)
         self.create_service(Trigger, '~/stop', self._on_stop, qos_profile=SERVICE_QOS)
@@ -130,9 +153,9 @@ class Recorder(Node):
             return
         if topic not in self.received:
             offered = [qos_to_dict(info.qos_profile) for info in self.get_publishers_info_by_topic(topic)]
-            self.writer.add_topic(topic, type_name, dump_qos(offered))
+            self._background.add_topic(topic, type_name, dump_qos(offered))
         self.received[topic] += 1
-        self.writer.write(topic, data, now)
+        self._background.write(topic, data, now)
 
     def _discover(self) -> None:
         for name, types in self.get_topic_names_and_types():
@@ -150,33 +173,112 @@ class Recorder(Node):
 
     # -- counters, flushing, stopping ------------------------------------------------------------------
     def counters(self) -> dict[str, str]:
-        """The loss counters as string key/values (``/diagnostics`` and the log summary use the same)."""
-        c = {'received_total': str(sum(self.received.values())), 'lost_total': str(sum(self.lost.values())),
-             'incompatible_qos_total': str(sum(self.incompatible.values())),
+        """The loss counters as string key/values (``/diagnostics`` and the log summary use the same).
+        Also called by the writer thread when a fault finishes the log: the counters are copied first
+        (one C-level copy each, atomic under the GIL) while the executor may be adding to them."""
+        received, lost, incompatible, stalls = (dict(self.received), dict(self.lost), dict(self.incompatible),
+                                                list(self.stalls))
+        c = {'received_total': str(sum(received.values())), 'lost_total': str(sum(lost.values())),
+             'incompatible_qos_total': str(sum(incompatible.values())),
              'flush_period': str(self.writer.flush_period), 'output': str(self.writer.path)}
-        for topic in sorted(set(self.received) | set(self.lost)):
-            c[f'received.{topic}'] = str(self.received[topic])
-            c[f'lost.{topic}'] = str(self.lost[topic])
-        for topic, n in sorted(self.incompatible.items()):
+        for topic in sorted(set(received) | set(lost)):
+            c[f'received.{topic}'] = str(received.get(topic, 0))
+            c[f'lost.{topic}'] = str(lost.get(topic, 0))
+        for topic, n in sorted(incompatible.items()):
             c[f'incompatible_qos.{topic}'] = str(n)
+        if stalls:
+            longest_end, longest = max(stalls, key=lambda s: s[1])
+            c.update({'stalls': str(len(stalls)), 'stalled_s': f'{sum(s for _, s in stalls):.3f}',
+                      'longest_stall_s': f'{longest:.3f}', 'longest_stall_end_ns': str(longest_end)})
+        if self._background.dropped:
+            c['not_recorded'] = str(self._background.dropped)   # received after the recording stopped
         return c
 
-    def _publish_diagnostics(self) -> None:
+    @property
+    def fault(self) -> WriteFault | None:
+        """Why the recording stopped early (None while it runs, and after a clean stop)."""
+        return self._background.fault
+
+    def fault_line(self) -> str:
+        """The one line that reports :attr:`fault` ('' without one)."""
+        fault = self.fault
+        if fault is None:
+            return ''
+        start = self.writer.start_ns
+        at = _when(fault.at_stamp_ns, fault.at_ns, start)
+        until = _when(fault.readable_until_stamp_ns, fault.readable_until_ns, start)
+        kept = (f'log readable up to {until} ({fault.kept:,} messages' +
+                (f'; {fault.cut:,} received after its last whole chunk were cut' if fault.cut else '') + ')'
+                if fault.readable_until_ns is not None or fault.kept else 'nothing readable was written')
+        extra = f'; {fault.problems}' if fault.problems else ''
+        return (f'recording stopped at {at}: {fault.reason} ({fault.detail}); {kept} in {self.writer.path}{extra}; '
+                'nothing more is recorded')
+
+    def fate(self) -> str:
+        """For a run summary: ``recording stopped at 9.4 s: No space left on device (log readable up to
+        8.9 s)``, or '' when the recording did not stop early."""
+        fault = self.fault
+        if fault is None:
+            return ''
+        start = self.writer.start_ns
+        at = _when(fault.at_stamp_ns, fault.at_ns, start, short=True)
+        if fault.readable_until_ns is None and not fault.kept:
+            return f'recording stopped at {at}: {fault.reason} (nothing readable was written)'
+        until = _when(fault.readable_until_stamp_ns, fault.readable_until_ns, start, short=True)
+        return f'recording stopped at {at}: {fault.reason} (log readable up to {until})'
+
+    def _status(self) -> DiagnosticStatus:
         c = self.counters()
+        fault = self.fault
         bad = c['lost_total'] != '0' or c['incompatible_qos_total'] != '0'
-        status = DiagnosticStatus(
-            level=DiagnosticStatus.WARN if bad else DiagnosticStatus.OK,
-            name=f'recorder: {self.get_fully_qualified_name()}', hardware_id='micro_feeder',
-            message=(f'{c["lost_total"]} lost, {c["incompatible_qos_total"]} incompatible-QoS events'
-                     if bad else f'recording to {self.writer.path}'),
-            values=[KeyValue(key=k, value=v) for k, v in c.items()])
-        msg = DiagnosticArray(status=[status])
+        if fault is not None:
+            level, message = DiagnosticStatus.ERROR, self.fault_line()
+            c.update(fault.record())
+        elif bad:
+            level, message = DiagnosticStatus.WARN, (f'{c["lost_total"]} lost, {c["incompatible_qos_total"]} '
+                                                     'incompatible-QoS events')
+        else:
+            level, message = DiagnosticStatus.OK, f'recording to {self.writer.path}'
+        return DiagnosticStatus(level=level, name=f'recorder: {self.get_fully_qualified_name()}',
+                                hardware_id='micro_feeder', message=message,
+                                values=[KeyValue(key=k, value=v) for k, v in c.items()])
+
+    def _publish_diagnostics(self) -> None:
+        msg = DiagnosticArray(status=[self._status()])
         msg.header.stamp = self.get_clock().now().to_msg()
         self._diagnostics.publish(msg)
 
-    def _flush_if_due(self) -> None:
-        if not self._closed:
-            self.writer.flush_if_due()
+    def _watch(self) -> None:
+        """Look at the writer thread: report a fault, a bug or a skipped topic once; notice a stall of
+        this whole process (a gap between two looks)."""
+        now = time.monotonic()
+        gap, self._last_watch = now - (self._last_watch or now), now
+        if gap > STALL_REPORT:
+            self._background.excuse()   # the writer thread was stopped with the process, not stuck
+            self.stalls.append((time.time_ns(), gap))
+            self.get_logger().warning(
+                f'the recorder did not run for {gap:.1f} s (its process stopped, or its executor busy or starved of '
+                'CPU): messages published meanwhile may be missing from the log, not counted as lost')
+        if self._closed:
+            return
+        self._background.poll()
+        self._report()
+
+    def _report(self) -> None:
+        background = self._background
+        for topic, reason in background.skipped.items():
+            if topic not in self._reported:
+                self._reported.add(topic)
+                self.get_logger().error(f'{topic} is not recorded: {reason}')
+        if background.error and 'error' not in self._reported:
+            self._reported.add('error')
+            self.get_logger().error(f'recorder error (a bug, please report it):\n{background.error}')
+        if self.fault is not None and 'fault' not in self._reported:
+            self._reported.add('fault')
+            self.get_logger().error(self.fault_line())
+            self._publish_diagnostics()
+            if not self.done.done():
+                self.done.set_result(True)
 
     def _on_stop(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         self.close()
@@ -185,15 +287,27 @@ class Recorder(Node):
         return response
 
     def close(self) -> Path:
-        """Stop recording: write the summary with the counters and ``metadata.yaml``. Idempotent."""
+        """Stop recording: write the summary with the counters and ``metadata.yaml``. Idempotent. After a
+        fault, reports it (once) instead: the log was finished when it happened."""
         if not self._closed:
             self._closed = True
-            self.writer.custom_data.update(self.counters())
-            self.writer.close()
-            self.get_logger().info(f'closed {self.writer.path}: {self.writer.message_count} messages')
+            self._background.close()    # a write stuck at the end is a fault too, reported here
+            self._report()
+            if self.fault is None:
+                self.get_logger().info(f'closed {self.writer.path}: {self.writer.message_count} messages')
         if not self.done.done():
             self.done.set_result(True)
         return self.writer.path
+
+
+def _when(stamp_ns: int | None, log_ns: int | None, start_ns: int | None, short: bool = False) -> str:
+    """Where in the run: ``sim time 9.412 s`` from a header stamp, else ``log time +9.41 s`` (from the
+    log's first message); ``short``: ``9.4 s`` for sim time."""
+    if stamp_ns is not None:
+        return f'{stamp_ns * 1e-9:.1f} s' if short else f'sim time {stamp_ns * 1e-9:.3f} s'
+    if log_ns is not None and start_ns is not None:
+        return f'log time +{(log_ns - start_ns) * 1e-9:.2f} s'
+    return 'the start'
 
 
 def main(args: list[str] | None = None) -> int:
@@ -217,8 +331,13 @@ def main(args: list[str] | None = None) -> int:
         executor.shutdown()
         node.destroy_node()
         rclpy.shutdown()
-    print(format_summary(summarize(LogReader(path))))
-    return 0
+    try:
+        log = LogReader(path)
+        summary = summarize(log)
+        print(format_summary(summary, coverage(log, summary.recorder, summary.part.stamp)))
+    except (OSError, ValueError) as err:
+        print(f'recorder: nothing readable in {path}: {err}', file=sys.stderr)
+    return 1 if node.fault is not None else 0
 
 
 if __name__ == '__main__':

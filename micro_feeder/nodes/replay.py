@@ -3,11 +3,13 @@
 Messages are published as recorded CDR bytes (no decode), each with the QoS its publisher offered when
 the log stored it (``offered_qos_profiles``; reliable, volatile, depth 100 otherwise), changed per topic by
 a rosbag2 QoS overrides file (``qos_profile_overrides_path``). As ``ros2 bag play`` users expect: it can
-wait for a subscriber on every replayed topic (``wait_for_subscribers``) and/or ``delay`` seconds before the
-first message, ``start_paused``, stop after ``playback_duration`` seconds of log, and, with
-``publish_clock``, publish the log's *sim* time on ``/clock`` (the latest header stamp or recorded ``/clock``
-replayed, falling back to the log time for a log with neither) with rosbag2's clock QoS (best effort,
-keep last 1). In a node namespace (``-r __ns:=/NS``) the recorded names are published under it, except
+wait for subscribers (``wait_for_subscribers``: one on every topic named in ``topics``, or, replaying every
+topic, one on any of them; at most ``wait_for_subscribers_timeout`` seconds, then it ends with ``timed_out``
+saying which topics had none) and/or ``delay`` seconds before the first message, ``start_paused``, stop
+after ``playback_duration`` seconds of log, and, with ``publish_clock``, publish the log's *sim* time on
+``/clock`` (the latest header stamp or recorded ``/clock`` replayed, falling back to the log time for a log
+with neither) with rosbag2's clock QoS (best effort, keep last 1). In a node namespace (``-r __ns:=/NS``)
+the recorded names are published under it, except
 ``/clock`` and ``/diagnostics``, which are global by convention. A player thread
 sleeps until each message's due time (coarse sleep, then a short busy wait) and records its own timing
 error: actual publish time minus due time [s] (the last ``TIMING_WINDOW`` of them, with the count and the
@@ -52,6 +54,7 @@ FIRST_STAMP_SEARCH = 10_000  # messages looked at for the first sim time before 
 GLOBAL_TOPICS = ('/clock', '/diagnostics', '/rosout', '/parameter_events', '/tf', '/tf_static')
 BUSY_WAIT = 0.002  # s: last stretch before a due time spent polling the clock instead of sleeping
 TIMING_WINDOW = 100_000  # timing errors kept for the percentiles (the latest ones)
+DEFAULT_WAIT_TIMEOUT = 30.0  # s: how long wait_for_subscribers waits by default
 
 
 def _descriptor(description: str, type_: int, float_range: tuple[float, float] | None = None
@@ -84,7 +87,11 @@ class Replay(Node):
         self.declare_parameter('delay', 0.0, _descriptor('wait this long [s] before the first message', d,
                                                          (0.0, 3600.0)))
         self.declare_parameter('wait_for_subscribers', False, _descriptor(
-            'before the first message, wait until every replayed topic has a subscriber', b))
+            'before the first message, wait for a subscriber on every topic named in "topics" (all topics '
+            'replayed: on any one of them)', b))
+        self.declare_parameter('wait_for_subscribers_timeout', DEFAULT_WAIT_TIMEOUT, _descriptor(
+            'wait_for_subscribers gives up after this long [s]: the replay ends, nothing published', d,
+            (0.0, 86400.0)))
         self.declare_parameter('start_paused', False, _descriptor('start paused (replay/pause false resumes)', b))
         self.declare_parameter('playback_duration', 0.0, _descriptor(
             'replay only this long [s] of the log from start_offset; 0 = to the end', d, (0.0, 1e9)))
@@ -92,7 +99,8 @@ class Replay(Node):
             'rosbag2 QoS overrides file: topic -> QoS policies replacing the recorded ones', s))
         p = {n: self.get_parameter(n).value for n in
              ('log', 'rate', 'loop', 'start_offset', 'topics', 'remap', 'publish_clock', 'clock_frequency', 'delay',
-              'wait_for_subscribers', 'start_paused', 'playback_duration', 'qos_profile_overrides_path')}
+              'wait_for_subscribers', 'wait_for_subscribers_timeout', 'start_paused', 'playback_duration',
+              'qos_profile_overrides_path')}
         if not p['log']:
             raise ValueError('parameter "log" is required (the log to replay)')
         self.log = LogReader(p['log'])
@@ -100,8 +108,12 @@ class Replay(Node):
         self.start_ns = self.log.start_ns + int(p['start_offset'] * 1e9)
         self.end_ns = self.start_ns + int(p['playback_duration'] * 1e9) if p['playback_duration'] else None
         self.delay, self.wait_for_subscribers = p['delay'], p['wait_for_subscribers']
+        self.wait_timeout = p['wait_for_subscribers_timeout']
         wanted = [t for t in p['topics'] if t]
         names = [self._recorded(t, 'topic') for t in wanted] if wanted else list(self.log.topics)
+        # the topics the user named each need a subscriber; replaying a whole log (/diagnostics, markers,
+        # parameters ... which nobody may listen to), one subscriber on any topic is enough
+        self.wait_for_every_topic = bool(wanted)
         self._read = list(names)        # what the player reads: with publish_clock, the recorded /clock too
         if p['publish_clock']:
             names = [n for n in names if n != '/clock']
@@ -131,6 +143,7 @@ class Replay(Node):
         self.timing_max = float('-inf')  # over the whole run [s]
         self.published = 0
         self.error: str | None = None  # why the replay stopped early (a pass had nothing to publish)
+        self.timed_out: str | None = None  # wait_for_subscribers gave up (which topics had no subscriber)
         self.failure: str | None = None  # why the player thread died (a bug or an unreadable log)
         self._start_offset = p['start_offset']
         self.finished = Future()
@@ -181,13 +194,30 @@ class Replay(Node):
         """Start playing (publishers should be matched first if nothing may be missed: wait_for_subscribers)."""
         self._thread.start()
 
+    def _unmatched(self) -> list[str]:
+        """The topics still waiting for a subscriber (published names); empty when the wait is over: every
+        topic named in ``topics`` has one, or, replaying every topic, any one of them has."""
+        waiting = sorted(pub.topic_name for pub in self._outputs.values() if not pub.get_subscription_count())
+        if not self.wait_for_every_topic and len(waiting) < len(self._outputs):
+            return []
+        return waiting
+
     def _before_first_message(self) -> bool:
-        """Wait for subscribers and/or the delay; False when stopped meanwhile."""
-        if self.wait_for_subscribers:
-            waiting = [n for n, pub in self._outputs.items() if not pub.get_subscription_count()]
+        """Wait for subscribers (at most ``wait_timeout``) and/or the delay; False when stopped meanwhile or
+        when the wait timed out (``timed_out`` says why)."""
+        if self.wait_for_subscribers and self._outputs:
+            deadline = time.monotonic() + self.wait_timeout
+            waiting = self._unmatched()
             if waiting:
-                self.get_logger().info(f'waiting for a subscriber on {", ".join(waiting)}')
-            while any(not pub.get_subscription_count() for pub in self._outputs.values()):
+                which = 'every one' if self.wait_for_every_topic else 'any'
+                self.get_logger().info(f'waiting for a subscriber on {which} of {", ".join(waiting)} '
+                                       f'(at most {self.wait_timeout:g} s)')
+            while waiting := self._unmatched():
+                if time.monotonic() > deadline:
+                    self.timed_out = (f'no subscriber after {self.wait_timeout:g} s on '
+                                      f'{"" if self.wait_for_every_topic else "any of "}{", ".join(waiting)}: '
+                                      'nothing was replayed')
+                    return False
                 if self._stop.wait(0.01):
                     return False
         return not self._stop.wait(self.delay) if self.delay else True
@@ -288,7 +318,9 @@ class Replay(Node):
 
 def main(args: list[str] | None = None, tap: Callable[[Node], None] | None = None) -> int:
     """Console script ``replay``: ``replay --ros-args -p log:=out/run1 -p rate:=2.0``. ``tap`` is given the
-    node before it plays (``micro-feeder replay --foxglove``)."""
+    node before it plays (``micro-feeder replay --foxglove``). Exit status: 0 at the end of the replay, 128 +
+    the signal number when SIGINT (130) or SIGTERM (143) stopped it, 1 when the wait for subscribers timed
+    out or the player died, 2 for a refused parameter or nothing to publish."""
     remove_stale_files()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = StopFlag().install()
@@ -319,12 +351,15 @@ def main(args: list[str] | None = None, tap: Callable[[Node], None] | None = Non
         executor.shutdown()
         node.destroy_node()
         rclpy.shutdown()
+    if stop.signal is not None:
+        return 128 + stop.signal
     if node.error:
         print(f'replay: error: {node.error}', file=sys.stderr)
         return 2
-    if node.failure:
-        print(f'replay: error: {node.failure}', file=sys.stderr)
-        return 1
+    for reason in (node.timed_out, node.failure):
+        if reason:
+            print(f'replay: error: {reason}', file=sys.stderr)
+            return 1
     return 0
 
 

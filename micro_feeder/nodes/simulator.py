@@ -47,7 +47,7 @@ from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from ..interface import messages, stamps, wire
-from ..interface.names import joint_names
+from ..interface.names import joint_names, receipt_frame
 from ..interface.transitions import TransitionEncoder
 from ..physics.dynamics import Event, SimulationError
 from ..physics.parameters import ParameterError, ParamSpec
@@ -170,6 +170,8 @@ class Simulator(Node):
         self.create_service(Trigger, '~/step', self._on_step, qos_profile=SERVICE_QOS)
 
         self.commands = IntakeCounters()
+        self._last_command_wall: float | None = None   # time.monotonic() of the last command received
+        self._stream_open = False       # the last trajectory applied was a stream's window (stamped, not empty)
         self._refusal_log = ThrottledLog()
         self._late_log = ThrottledLog(label='late')
         self.steps_granted = 0
@@ -412,7 +414,9 @@ class Simulator(Node):
         """Subscription callback (executor thread): queue the serialized message; the intake does the rest."""
         self.commands.received += 1
         stamp = stamps.header_stamp(data) if topic == 'actuator/trajectory' else 0.0
-        self._intake.submit(Received(topic, data, stamp))
+        command_id = stamps.header_frame_id(data) if topic == 'actuator/trajectory' else ''
+        self._last_command_wall = time.monotonic()
+        self._intake.submit(Received(topic, data, stamp, command_id=command_id))
 
     def _parse(self, received: Received) -> tuple[str, Any]:
         """A checked command for the current model, or ValueError with the reason (no lock needed)."""
@@ -437,20 +441,20 @@ class Simulator(Node):
         between two ticks; in lockstep each command grants its step."""
         generation = self._generation
         outcomes = self._plan(batch)
-        receipts: list[tuple[str, float]] = []    # published after the lock: a tick waits for it
+        receipts: list[tuple[Received, float]] = []    # published after the lock: a tick waits for it
         with self._lock:
             if generation != self._generation:      # a reset changed the model while parsing
                 outcomes = self._plan(batch)
             for outcome in outcomes:
                 if self._lockstep:
-                    self._acknowledge(outcome.received.topic, self._stepper.t)
+                    self._acknowledge(outcome.received, self._stepper.t)
                 else:
-                    receipts.append((outcome.received.topic, self._stepper.t))
+                    receipts.append((outcome.received, self._stepper.t))
                 self._apply(outcome)
                 if self._lockstep:
                     self._grant_step()
-        for topic, t in receipts:
-            self._acknowledge(topic, t)
+        for received, t in receipts:
+            self._acknowledge(received, t)
         self.commands.dropped = self._intake.dropped if self._intake is not None else 0
 
     def _apply(self, outcome: Outcome) -> None:
@@ -467,8 +471,10 @@ class Simulator(Node):
                 if topic == 'actuator/trajectory':
                     self._note_late(command.stamp)
                     self._stepper.command_trajectory(command)
+                    self._stream_open = command.stamp > 0.0 and not command.is_stop
                 else:
                     self._stepper.command_setpoints(command)
+                    self._stream_open = False
             except ValueError as err:
                 self._refuse(str(err))
 
@@ -486,9 +492,18 @@ class Simulator(Node):
                 f'{self._stepper.t:.6f} s were dropped (the sender should schedule further ahead, e.g. the '
                 "actuator's stream.lead)"))
 
-    def _acknowledge(self, topic: str, t: float) -> None:
-        """``~/command_receipts``: a command arrived on ``topic`` and was applied at sim time ``t`` (s)."""
-        self._pub_receipts.publish(messages.header_bytes(t, topic))
+    def _stream_silent(self, t: float) -> float:
+        """Sim seconds since the strokes of a stream (the last trajectory applied was a window stamped ahead)
+        ran out with nothing after them: its sender stalled, died or lost the simulator. 0 otherwise."""
+        if not self._stream_open:
+            return 0.0
+        start, table = self._stepper.schedule.pieces[-1]
+        return max(t - max(start, table.end_time()), 0.0)
+
+    def _acknowledge(self, received: Received, t: float) -> None:
+        """``~/command_receipts``: a command arrived on its topic (with its identity, if it has one) and was
+        handled at sim time ``t`` (s)."""
+        self._pub_receipts.publish(messages.header_bytes(t, receipt_frame(received.topic, received.command_id)))
 
     def _refuse(self, reason: str) -> None:
         self.commands.refused += 1
@@ -516,6 +531,7 @@ class Simulator(Node):
         try:
             stepper = Stepper(build_model(values(self, self._model_specs)))
             _check_finite(stepper)
+            stepper.applied = self._stepper.applied      # a command applied before the reset stays applied
         except (ParameterError, ValueError, SimulationError) as err:
             response.success, response.message = False, f'model parameters refused, not reset: {err}'
             return response
@@ -523,6 +539,7 @@ class Simulator(Node):
             with self._locked(self._intake.busy), self._locked(self._lock):
                 self._intake.drain()
                 self._stepper = stepper
+                self._stream_open = False
                 self._generation += 1
                 self._model_parameters = parameters
                 self._model_pending = False
@@ -621,7 +638,10 @@ class Simulator(Node):
             steps_granted=self.steps_granted, states_published=self.states_published,
             pending_reset=self._model_pending, transitions=state.transitions,
             intake=self.commands.as_items(),
-            other_simulators=len(self.twins)))
+            other_simulators=len(self.twins),
+            command_age=(time.monotonic() - self._last_command_wall if self._last_command_wall is not None
+                         else math.nan),
+            stream_silent=self._stream_silent(t)))
         if status.level != 0:
             self.get_logger().warning(status.message, throttle_duration_sec=10.0)
         return DiagnosticStatus(name=status_name(self, 'loop'), hardware_id='micro_feeder',

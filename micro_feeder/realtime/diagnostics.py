@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -10,6 +11,7 @@ import numpy as np
 OK, WARN, ERROR = 0, 1, 2       # diagnostic_msgs/DiagnosticStatus levels
 LAGGING = 0.95                  # achieved / target real-time factor below which the loop is behind
 WEDGED_S = 1.0                  # s: a tick working longer than this is reported as stuck
+SILENT_STREAM_S = 0.1           # s of sim time a stream's strokes may have run out before it is reported
 
 
 @dataclass(frozen=True)
@@ -34,6 +36,8 @@ class LoopSnapshot:
     transitions: Mapping[str, int]
     intake: Mapping[str, str]
     other_simulators: int = 0     # other live simulators of this one's name seen since start
+    command_age: float = math.nan  # wall s since the last command arrived (nan: none yet)
+    stream_silent: float = 0.0    # sim s since a stream's strokes ran out with no command after them
 
 
 @dataclass(frozen=True)
@@ -65,6 +69,9 @@ def loop_status(s: LoopSnapshot) -> LoopStatus:
     elif wedged:
         level, message = ERROR, (f'one tick has been working for {s.tick_age:.1f} s: the physics cannot advance '
                                  'in bounded time with these parameters (see integration.*)')
+    elif s.stream_silent > SILENT_STREAM_S:
+        level, message = WARN, (f'command source silent: the streamed strokes ran out {s.stream_silent:.3f} s of '
+                                f'sim time ago (last command {s.command_age:.1f} s ago, wall); strokes held')
     elif lagging:
         level, message = WARN, 'behind real time: the physics cannot keep up'
     else:
@@ -76,7 +83,8 @@ def loop_status(s: LoopSnapshot) -> LoopStatus:
               'tick_period_p50_ms': _pct(s.periods_ms, 50), 'tick_period_p99_ms': _pct(s.periods_ms, 99),
               'tick_compute_p99_ms': _pct(s.busy_ms, 99), 'overruns': str(s.overruns),
               'tick_in_progress_s': f'{s.tick_age:.3f}',
-              'other_simulators': str(s.other_simulators),
+              'other_simulators': str(s.other_simulators), 'command_age_s': f'{s.command_age:.3f}',
+              'stream_silent_s': f'{s.stream_silent:.3f}',
               'lockstep': str(s.lockstep), 'steps_granted': str(s.steps_granted),
               'states_published': str(s.states_published),
               **s.intake, 'model_parameters_pending_reset': str(s.pending_reset)}

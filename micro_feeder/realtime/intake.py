@@ -35,6 +35,7 @@ class Received:
     data: bytes | None
     stamp: float
     refused: str = ''
+    command_id: str = ''      # the sender's identity for the command (a trajectory's header.frame_id)
 
 
 @dataclass

@@ -41,6 +41,8 @@ class CommandRejected(ValueError):
 class TrajectoryCommand:
     """A checked ``actuator/trajectory``: knots in the simulator's joint order, SI units.
 
+    ``command_id``: the header's frame_id, which a sender may use to name the command (the actuator does:
+    ``/actuator:b1:w3``); a command whose identity was already applied is refused as a duplicate.
     ``stamp`` (s, sim time; 0 = on receipt); ``offsets`` (n,) time_from_start (s); ``positions`` (n, joints)
     (m); ``velocities`` / ``accelerations`` (n, joints) or ``None`` when absent. No knots = stop.
     """
@@ -50,6 +52,7 @@ class TrajectoryCommand:
     positions: np.ndarray
     velocities: np.ndarray | None
     accelerations: np.ndarray | None
+    command_id: str = ''       # header.frame_id: the sender's identity for the command ('' = none)
 
     @property
     def is_stop(self) -> bool:
@@ -111,7 +114,8 @@ def parse_trajectory(msg: JointTrajectory, joints: Sequence[str], limits: tuple[
         return (sec + nanosec * 1e-9, _field(points, 'positions', order, True),
                 _field(points, 'velocities', order, False), _field(points, 'accelerations', order, False))
 
-    return _checked(seconds(msg.header.stamp), list(msg.joint_names), len(points), knots, joints, limits)
+    return _checked(seconds(msg.header.stamp), list(msg.joint_names), len(points), knots, joints, limits,
+                    msg.header.frame_id)
 
 
 def parse_trajectory_cdr(data: bytes, joints: Sequence[str], limits: tuple[float, float]) -> TrajectoryCommand:
@@ -135,18 +139,18 @@ def parse_trajectory_cdr(data: bytes, joints: Sequence[str], limits: tuple[float
         columns = slice(None) if order == list(range(len(order))) else order    # no gather in joint order
         return offsets, records['pos'][:, columns], records['vel'][:, columns], records['acc'][:, columns]
 
-    return _checked(decoded.stamp, decoded.names, decoded.n_points, knots, joints, limits)
+    return _checked(decoded.stamp, decoded.names, decoded.n_points, knots, joints, limits, decoded.frame_id)
 
 
 def _checked(stamp: float, names: list[str], n_points: int, knots: Callable[[list[int]], tuple[np.ndarray, ...]],
-             joints: Sequence[str], limits: tuple[float, float]) -> TrajectoryCommand:
+             joints: Sequence[str], limits: tuple[float, float], command_id: str = '') -> TrajectoryCommand:
     """The checks of :func:`parse_trajectory`; ``knots(order)`` reads (offsets, positions, velocities or
     None, accelerations or None) with columns in the simulator's joint ``order``, only once the cheap
     checks have passed."""
     if stamp < 0:
         raise CommandRejected(f'trajectory: negative header.stamp {stamp:g} s')
     if not n_points:
-        return TrajectoryCommand(stamp, np.zeros(0), np.zeros((0, len(joints))), None, None)
+        return TrajectoryCommand(stamp, np.zeros(0), np.zeros((0, len(joints))), None, None, command_id)
     if n_points > MAX_POINTS:
         raise CommandRejected(f'trajectory: {n_points} points, more than {MAX_POINTS}: send long strokes '
                               'in windows (each replaces the schedule from its start on), as the actuator does')
@@ -178,7 +182,7 @@ def _checked(stamp: float, names: list[str], n_points: int, knots: Callable[[lis
     if accelerations is not None:
         _check_range(accelerations, -bounds.acceleration, bounds.acceleration, 'trajectory: acceleration',
                      'm/s^2')
-    return TrajectoryCommand(stamp, offsets, positions, velocities, accelerations)
+    return TrajectoryCommand(stamp, offsets, positions, velocities, accelerations, command_id)
 
 
 def parse_setpoints(data: Sequence[float], n_actuators: int, limits: tuple[float, float]) -> np.ndarray:

@@ -11,12 +11,14 @@ What it reads from the log (all recorded by default, see docs/logs.md):
 * ``simulator/parameters`` (latched ``rcl_interfaces/ParameterEvent``): the model parameters in force
   and the node's ``step_period`` / ``real_time_factor`` / ``start_paused``.
 * ``simulator/command_receipts`` (``std_msgs/Header``): one per command the simulator received,
-  stamp = sim time of receipt, ``frame_id`` = the command's topic. The i-th receipt naming a topic is
-  paired with the i-th recorded message on that topic (per-publisher order is kept by DDS, so the
-  pairing is exact with one publisher per command topic). A stamp-0 command applies at its receipt
-  time, as does one stamped in the past; a future stamp applies at the stamp (the Stepper decides,
-  exactly as in the node). Without receipts (an older log) the receipt time is estimated as the stamp of
-  the last pose recorded before the command, which is ambiguous by up to a tick.
+  stamp = sim time of receipt, ``frame_id`` = the command's topic, then ``#`` and the command's identity
+  when it has one (the actuator names every trajectory). A receipt with an identity is paired with the
+  recorded message of that identity; one without, with the next recorded message on its topic that has
+  none (per-publisher order is kept by DDS, so the pairing is exact with one such publisher per topic).
+  A stamp-0 command applies at its receipt time, as does one stamped in the past (when it joins the
+  stroke without a jump); a future stamp applies at the stamp (the Stepper decides, exactly as in the
+  node). Without receipts (an older log) the receipt time is estimated as the stamp of the last pose
+  recorded before the command, which is ambiguous by up to a tick.
 * ``particle/pose``: the stop times and the reference trajectory. The simulator stops its integration
   at every published pose; the stamps are rounded to 1 ns, so the exact stop times are rebuilt as
   the simulator computed them, ``t + step_period`` per step (stepped mode, or ``real_time_factor`` 0),
@@ -36,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from ..interface.names import joint_names
+from ..interface.names import joint_names, split_receipt_frame
 from ..interface.stamps import to_ns
 from ..logs.reader import LogMessage, LogReader
 from ..logs.sim_parameters import recorded_parameters
@@ -194,12 +196,19 @@ def _commands(log: LogReader, pose_log: list[tuple[int, int]], notes: list[str])
             notes.append('the log has no simulator/command_receipts (recorded by an older simulator): receipt '
                          'times estimated from the last pose recorded before each command, ambiguous by a tick')
         return _estimated(recorded, pose_log), 'estimated'
-    receipts, reset = first_segment([(m.stamp_ns, m.message.frame_id)
+    receipts, reset = first_segment([(m.stamp_ns, split_receipt_frame(m.message.frame_id))
                                      for m in log.messages(['simulator/command_receipts'], decoded=True)])
-    queues = {topic: iter(msgs) for topic, msgs in recorded.items()}
+    named: dict[str, list[LogMessage]] = defaultdict(list)       # identity: recorded messages (resent ones too)
+    unnamed: dict[str, list[LogMessage]] = defaultdict(list)
+    for topic, msgs in recorded.items():
+        for m in msgs:
+            command_id = _command_id(m.message)
+            (named[command_id] if command_id else unnamed[topic]).append(m)
+    queues = {topic: iter(msgs) for topic, msgs in unnamed.items()}
     out, missing = [], 0
-    for ns, topic in receipts:
-        m = next(queues.get(topic, iter(())), None)
+    for ns, (topic, command_id) in receipts:
+        m = (named[command_id].pop(0) if named.get(command_id) else None) if command_id else \
+            next(queues.get(topic, iter(())), None)
         if m is None:
             missing += 1
         else:
@@ -212,6 +221,12 @@ def _commands(log: LogReader, pose_log: list[tuple[int, int]], notes: list[str])
         notes.append(f'{unacknowledged} recorded commands have no receipt from the simulator (sent after it '
                      'stopped, or it missed them): not applied')
     return out, 'recorded'
+
+
+def _command_id(message: Any) -> str:
+    """A recorded command's identity: a trajectory's ``header.frame_id`` ('' for set-points and unnamed)."""
+    header = getattr(message, 'header', None)
+    return getattr(header, 'frame_id', '') if header is not None else ''
 
 
 def _estimated(recorded: Mapping[str, list[LogMessage]], pose_log: list[tuple[int, int]]) -> list[Command]:

@@ -10,6 +10,7 @@ stepped run repeatable bit for bit.
 from __future__ import annotations
 
 import functools
+from collections import OrderedDict
 from collections.abc import Mapping
 from typing import Any
 
@@ -21,6 +22,9 @@ from ..physics.particle import ParticleParams
 from ..physics.trajectory import CommandLimits, check_table
 from ..physics.waveforms import StrokeSchedule, trajectory_table
 from .commands import CommandRejected, TrajectoryCommand, start_time
+
+REMEMBERED_COMMANDS = 100_000    # identities of applied commands kept for refusing duplicates (~6 min of windows)
+JOIN_TOLERANCE = (1e-9, 1e-5)    # m, m/s: a late trajectory joins the stroke in force only this close to it
 
 
 @functools.lru_cache(maxsize=4)
@@ -47,6 +51,7 @@ class Stepper:
 
     def __init__(self, model: FeederModel):
         self.model = model
+        self.applied: OrderedDict[str, float] = OrderedDict()   # command identity: sim time applied (s)
         self.reset()
         self._warm_up()
 
@@ -95,8 +100,16 @@ class Stepper:
         for stamp 0); an empty one holds the stroke from then on. Returns the start time (s).
 
         Raises :class:`CommandRejected` (the schedule unchanged) when the interpolated stroke, joined to
-        the stroke in force at the start, leaves the piezo limits anywhere between knots."""
+        the stroke in force at the start, leaves the piezo limits anywhere between knots; when its identity
+        (``command_id``) was applied before (a duplicate: each command applies once, whoever resends it);
+        and when it is late (stamped before now) and joining it now would jump the stroke
+        (:meth:`_check_late_join`)."""
+        if cmd.command_id in self.applied:
+            raise CommandRejected(f'trajectory {cmd.command_id}: a duplicate of the command applied at '
+                                  f't = {self.applied[cmd.command_id]:.9f} s, not applied again')
         t0 = start_time(cmd.stamp, self.state.t)
+        if not cmd.is_stop and 0.0 < cmd.stamp < t0:
+            self._check_late_join(cmd, t0)
         if cmd.is_stop:
             self.schedule.hold_from(t0)
         else:
@@ -109,7 +122,30 @@ class Stepper:
                 self.schedule = StrokeSchedule.of_pieces(before)
                 raise CommandRejected(f'trajectory: {reason}')
         self._prune()
+        if cmd.command_id:
+            self.applied[cmd.command_id] = t0
+            if len(self.applied) > REMEMBERED_COMMANDS:
+                self.applied.popitem(last=False)
         return t0
+
+    def _check_late_join(self, cmd: TrajectoryCommand, t0: float) -> None:
+        """A trajectory stamped before ``t0`` (now) starts now, its earlier knots dropped: accepted only when
+        the stroke in force now is where the trajectory itself is now (a stream window whose start the previous
+        window covered), within :data:`JOIN_TOLERANCE`; otherwise joining it mid-way would jump the surface and
+        throw the part, so it is refused (a streaming sender re-phases instead)."""
+        times = cmd.stamp + cmd.offsets
+        late_ms = (t0 - cmd.stamp) * 1e3
+        if times[-1] <= t0:
+            raise CommandRejected(f'trajectory late by {late_ms:.3f} ms: it ended before it arrived (at '
+                                  f't = {times[-1]:.9f} s), not applied')
+        own = StrokeSchedule(trajectory_table(times, cmd.positions, cmd.velocities, cmd.accelerations)).evaluate(t0)
+        now = self.schedule.evaluate(t0)
+        jump = np.abs(own[:2] - now[:2])
+        if jump[0].max() > JOIN_TOLERANCE[0] or jump[1].max() > JOIN_TOLERANCE[1]:
+            k = int(np.argmax(np.maximum(jump[0] / JOIN_TOLERANCE[0], jump[1] / JOIN_TOLERANCE[1])))
+            raise CommandRejected(f'trajectory late by {late_ms:.3f} ms: joining it at t = {t0:.9f} s would jump '
+                                  f'joint {k} by {jump[0, k] * 1e6:.4g} µm and {jump[1, k] * 1e3:.4g} mm/s, which '
+                                  'throws the part; not applied (stamp windows ahead of sim time, or re-phase)')
 
     def command_setpoints(self, values: np.ndarray) -> None:
         """Hold the strokes at ``values`` (m) from now on (the piezo model, when on, smooths the step)."""

@@ -2,16 +2,17 @@
 
 What the actuator node sends, without ROS: :func:`sample_waveform` gives a whole burst's knots,
 :class:`StrokeStream` the successive windows of a streamed one (each stamped at its start in sim time,
-taking over at a knot the previous window ends on), :func:`encoded_window` one window as the serialized
-JointTrajectory. Knots are placed so that the quintic interpolation the simulator (and
-joint_trajectory_controller) runs through them reproduces the schedule within 5e-13 m
-(:mod:`micro_feeder.physics.trajectory`).
+taking over at a knot the previous window ends on; re-phased to sim time when it goes back or the sender
+stalled: :meth:`StrokeStream.follow`), :func:`encode_window` one window as the serialized JointTrajectory.
+Knots are placed so that the quintic interpolation the simulator (and joint_trajectory_controller) runs
+through them reproduces the schedule within 5e-13 m (:mod:`micro_feeder.physics.trajectory`).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -20,6 +21,9 @@ from ..interface.names import joint_names
 from ..physics.trajectory import burst_end_ns, max_spacing, table_knots, waveform_knots
 from ..physics.waveforms import StrokeParams, waveform_table
 
+Window = tuple[int, np.ndarray, np.ndarray]   # stamp (ns of sim time), knot offsets (ns), (3, n, actuators) s, ṡ, s̈
+TIME_BACK = 1e-3               # s: sim time going back more than this is a reset or a new simulator
+RAMP_MIN_NS = 1_000_000        # a re-phased stream ramps to the waveform over at least this long (ns)
 MESSAGE_BYTES = 256 * 1024     # a trajectory message's knots take at most this many bytes (whatever the joints)
 
 
@@ -53,6 +57,10 @@ class StrokeStream:
         self._window_ns = max(round(window * 1e9), 1)
         self._max_points = points_per_message(max_points, n_actuators)
         self._max_spacing = max_spacing(params, knots_per_stroke)
+        self._ramp: tuple[int, np.ndarray] | None = None   # (burst time ns, held strokes) the next window starts from
+        self.last_positions = np.zeros(n_actuators)        # strokes at the last knot sent (m): what a simulator
+                                                           # holds once the stream runs out
+        self._last_now: float | None = None                # sim time of the last follow() (s)
 
     @property
     def done(self) -> bool:
@@ -60,20 +68,71 @@ class StrokeStream:
 
     @property
     def scheduled_until(self) -> float:
-        """Sim time (s) up to which the strokes are scheduled."""
-        return (self.origin_ns + self.sent_ns) * 1e-9
+        """Sim time (s) up to which the strokes are scheduled (a pending ramp's start: nothing after it is sent)."""
+        return (self.origin_ns + (self._ramp[0] if self._ramp is not None else self.sent_ns)) * 1e-9
 
-    def next_window(self) -> tuple[int, np.ndarray, np.ndarray]:
+    def next_window(self) -> Window:
         """(stamp in ns of sim time, knot offsets from the stamp in ns, (3, n, actuators) s, ṡ, s̈)."""
         start = self.sent_ns
         stop = start + self._window_ns if self.end_ns is None else min(start + self._window_ns, self.end_ns)
         table = waveform_table(self._strokes_through(stop), self.n_actuators)
         ns, values = table_knots(table, start * 1e-9, stop * 1e-9, max_spacing=self._max_spacing)
-        if ns.size > self._max_points:       # cut at a message's knots; later windows are made that long
-            ns, values = ns[:self._max_points], values[:, :self._max_points]
+        room = self._max_points - (self._ramp is not None)
+        if ns.size > room:                   # cut at a message's knots; later windows are made that long
+            ns, values = ns[:room], values[:, :room]
             self._window_ns = max(int(ns[-1]) - start, 1)
         self.sent_ns = int(ns[-1])
+        self.last_positions = values[0, -1].copy()
+        if self._ramp is not None:           # a knot holding the strokes where they are, then the waveform
+            start, held = self._ramp
+            self._ramp = None
+            ns = np.concatenate([[start], ns])
+            rest = np.zeros((3, 1, self.n_actuators))
+            rest[0, 0] = held
+            values = np.concatenate([rest, values], axis=1)
         return self.origin_ns + start, ns - start, values
+
+    def follow(self, now: float, lead: float, held: Callable[[], np.ndarray | None] | None = None, *,
+               new_simulator: bool = False) -> tuple[list[Window], str | None]:
+        """The windows to send now that sim time is ``now`` (s), keeping ``lead`` (s) of strokes scheduled ahead,
+        and why the stream re-phased first (None when it did not). It re-phases (:meth:`rejoin`, ``lead`` ahead,
+        from the strokes ``held()`` (m) the simulator reports now; when None, the last knot sent, or rest after
+        a time jump) when sim time went back or the sender saw ``new_simulator`` (a reset, a new simulator:
+        the burst continuing) or passed the strokes scheduled (this sender stalled, or lost the simulator: in
+        phase with sim time, the missed strokes skipped). Nothing stale is ever sent, and a re-phased stream
+        starts where the simulator's strokes are, so they never jump."""
+        why = None
+        at_ns = round((now + lead) * 1e9)
+        if new_simulator or (self._last_now is not None and now < self._last_now - TIME_BACK):
+            cause = ('a new simulator' if new_simulator else
+                     f'sim time went back from {self._last_now:.6f} s to {now:.6f} s (a reset, or a new simulator)')
+            why = f'{cause}: restarted from rest at t = {at_ns * 1e-9:.6f} s'
+            self.rejoin(at_ns, _reported(held, np.zeros(self.n_actuators)), keep_phase=False)
+        elif self.sent_ns > 0 and not self.done and self.scheduled_until < now:
+            why = (f'sim time {now:.6f} s passed the strokes scheduled (until {self.scheduled_until:.6f} s: the '
+                   f'sender stalled or lost the simulator, or stream.lead is short): rejoined at t = '
+                   f'{at_ns * 1e-9:.6f} s')
+            self.rejoin(at_ns, _reported(held, self.last_positions), keep_phase=True)
+        self._last_now = now
+        windows = []
+        while not self.done and self.scheduled_until < now + lead:
+            windows.append(self.next_window())
+        return windows, why
+
+    def rejoin(self, at_ns: int, held: np.ndarray, *, keep_phase: bool) -> None:
+        """Start the next window at sim time ``at_ns`` from the strokes ``held`` (m, at rest), ramping to the
+        waveform over one stroke period: after the simulator's strokes ran out (``keep_phase``: the waveform
+        stays where the schedule puts it in sim time, what was missed is skipped, never replayed) or after
+        sim time went back (a reset, a new simulator: the burst continues from where it was sent, with a new
+        origin). The ramp is a quintic from rest at ``held`` to the waveform's s, ṡ, s̈, so the stroke never
+        jumps."""
+        ramp_ns = max(round(self.params.period_s * 1e9), RAMP_MIN_NS)
+        if keep_phase:
+            self.sent_ns = max(at_ns + ramp_ns - self.origin_ns, self.sent_ns)
+            self.origin_ns = at_ns + ramp_ns - self.sent_ns
+        else:
+            self.origin_ns = at_ns + ramp_ns - self.sent_ns
+        self._ramp = (self.sent_ns - ramp_ns, np.asarray(held, dtype=float).copy())
 
     def _strokes_through(self, stop_ns: int) -> StrokeParams:
         """The burst's parameters with enough strokes to cover burst time ``stop_ns`` (endless: a count
@@ -85,8 +144,21 @@ class StrokeStream:
         return dataclasses.replace(p, count=max(needed, 1))
 
 
-def encoded_window(stream: StrokeStream) -> bytes:
-    """The stream's next window as a serialized JointTrajectory stamped at its start."""
-    stamp_ns, offsets_ns, knots = stream.next_window()
-    return trajectory_cdr.encode(joint_names(stream.n_actuators), offsets_ns, knots[0], knots[1], knots[2],
-                                 stamps.to_time(stamp_ns * 1e-9))
+def _reported(held: Callable[[], np.ndarray | None] | None, otherwise: np.ndarray) -> np.ndarray:
+    strokes = None if held is None else held()
+    return otherwise if strokes is None else strokes
+
+
+def encode_window(window: Window, command_id: str = '') -> bytes:
+    """A window (:meth:`StrokeStream.next_window`) as a serialized JointTrajectory stamped at its start,
+    named ``command_id``."""
+    stamp_ns, offsets_ns, knots = window
+    return trajectory_cdr.encode(joint_names(knots.shape[2]), offsets_ns, knots[0], knots[1], knots[2],
+                                 stamps.to_time(stamp_ns * 1e-9), command_id)
+
+
+def encode_stop(n_actuators: int, at: float, command_id: str = '') -> bytes:
+    """An empty JointTrajectory stamped at sim time ``at`` (s): hold the strokes from then on (a stream's end)."""
+    empty = np.zeros((0, n_actuators))
+    return trajectory_cdr.encode(joint_names(n_actuators), np.zeros(0), empty, empty, empty, stamps.to_time(at),
+                                 command_id)

@@ -1,0 +1,121 @@
+"""A stream follows sim time wherever it goes (issue 30): after a reset (sim time back to 0, as a new simulator
+also shows it), a new simulator whose sim time is already past the old one's, or a stall of the sender (sim
+time ran past the strokes scheduled), the stream re-phases
+``stream.lead`` ahead of sim time, ramping from the strokes the simulator holds; it never replays stale
+windows, never joins mid-stroke with a jump, and the part never moves faster than the same strokes move it
+without the fault.
+
+Driven as the nodes drive it, without ROS: the actuator's :class:`StrokeStream` windows, serialized and
+parsed by the simulator's command code, applied to the simulator's Stepper, which is sampled finely (37 µs)
+so that a jump in the stroke or a throw of the part cannot hide between samples.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import pytest
+
+from micro_feeder.interface.names import joint_names
+from micro_feeder.physics.waveforms import StrokeParams
+from micro_feeder.settings import load_settings
+from micro_feeder.sim.commands import CommandRejected, parse_trajectory_cdr
+from micro_feeder.sim.stepper import Stepper, build_model
+from micro_feeder.sim.stream import StrokeStream, encode_window
+
+LEAD, WINDOW = 0.02, 0.005          # s: stream.lead and stream.window (short, so the faults are long against them)
+SAMPLE = 1e-3 / 27                  # s: the simulator's state is looked at this often
+DURATION = 0.3                      # s of sim time
+FAULT_AT, FAULT_FOR = 0.1, 0.05     # s: when the fault happens; how long the sender is stalled
+SCENARIOS = {'one actuator': [], 'travelling wave': ['--params', 'config/travelling_wave.yaml']}
+
+
+@dataclass
+class Run:
+    refused: list[str] = field(default_factory=list)
+    rephased: list[tuple[float, str]] = field(default_factory=list)
+    window_starts: list[float] = field(default_factory=list)   # sim time each applied window starts (s)
+    max_stroke_step: float = 0.0     # largest change of any stroke between two samples (m)
+    max_speed: float = 0.0           # the part's largest speed at a sample (m/s)
+
+
+def _run(scenario: str, fault: str) -> Run:
+    params_file = SCENARIOS[scenario][1:] if SCENARIOS[scenario] else []
+    flat = load_settings(params_file)
+    stepper = Stepper(build_model(flat))
+    n = stepper.model.n_actuators
+    stream = StrokeStream(StrokeParams.from_flat({**flat, 'stroke.count': 1}), 0, n, round(LEAD * 1e9),
+                          window=WINDOW, max_points=2000, knots_per_stroke=0)
+    run, previous, sent, fault_done, new_simulator = Run(), None, 0, False, False
+    elapsed = 0.0                                       # sim time lived through, across the reset
+    while elapsed < DURATION:
+        stalled = fault == 'stall' and FAULT_AT <= stepper.t < FAULT_AT + FAULT_FOR
+        stepper_now = stepper
+        if not stalled:
+            windows, why = stream.follow(stepper.t, LEAD, stepper_now.observe().strokes.copy,
+                                         new_simulator=new_simulator)
+            new_simulator = False
+            if why is not None:
+                run.rephased.append((stepper.t, why))
+            for window in windows:
+                sent += 1
+                cmd = parse_trajectory_cdr(encode_window(window, f'w{sent}'), joint_names(n), stepper.limits)
+                try:
+                    stepper.command_trajectory(cmd)
+                    run.window_starts.append(window[0] * 1e-9)
+                except CommandRejected as err:
+                    run.refused.append(str(err))
+        stepper.advance(stepper.t + SAMPLE)
+        elapsed += SAMPLE
+        obs = stepper.observe()
+        run.max_speed = max(run.max_speed, float(np.hypot(obs.xdot, obs.zdot)))
+        if previous is not None:
+            run.max_stroke_step = max(run.max_stroke_step, float(np.max(np.abs(obs.strokes - previous))))
+        previous = obs.strokes.copy()
+        if fault == 'reset' and not fault_done and stepper.t >= FAULT_AT:
+            stepper.reset()                             # what ~/reset, or a restarted simulator, shows
+            fault_done, previous = True, None
+        if fault == 'new simulator' and not fault_done and stepper.t >= FAULT_AT:
+            # a restarted simulator first seen when its sim time is a little past the old one's, inside the
+            # strokes already scheduled: it holds none of them (the actuator learns it from the graph)
+            fresh = Stepper(build_model(flat))
+            fresh.advance(stepper.t + LEAD / 4)
+            stepper, fault_done, previous, new_simulator = fresh, True, None, True
+    return run
+
+
+@pytest.fixture(scope='module')
+def unfaulted() -> dict[str, Run]:
+    return {scenario: _run(scenario, 'none') for scenario in SCENARIOS}
+
+
+@pytest.mark.parametrize('scenario', list(SCENARIOS))
+@pytest.mark.parametrize('fault', ['stall', 'reset', 'new simulator'])
+def test_a_stream_rephases_without_stale_windows_jumps_or_throws(scenario: str, fault: str,
+                                                                  unfaulted: dict[str, Run]) -> None:
+    reference, run = unfaulted[scenario], _run(scenario, fault)
+    assert not reference.refused and not reference.rephased
+    assert not run.refused, run.refused[:3]                 # no window late, none joined with a jump
+    assert len(run.rephased) == 1, run.rephased
+    when, why = run.rephased[0]
+    assert {'reset': 'went back', 'stall': 'passed the strokes', 'new simulator': 'a new simulator'}[fault] in why, why
+    resumed = min(t for t in run.window_starts if t >= when)
+    assert resumed - when <= 2 * LEAD + 1e-9                # strokes again within 2 x stream.lead
+    # the strokes never move faster than the waveform does (a ramp, no jump), the part never faster than
+    # the same strokes move it without the fault
+    assert run.max_stroke_step <= reference.max_stroke_step * (1 + 1e-6), (run.max_stroke_step,
+                                                                           reference.max_stroke_step)
+    assert run.max_speed <= reference.max_speed * 1.05, (run.max_speed, reference.max_speed)
+
+
+def test_a_stalled_sender_skips_what_it_missed() -> None:
+    """After a stall, the waveform continues where sim time puts it: nothing covers the stretch the sender
+    missed (what an unstalled stream would have sent then is skipped, not replayed late); the next window
+    starts ``stream.lead`` after the sender is back."""
+    run = _run('one actuator', 'stall')
+    when, _ = run.rephased[0]
+    scheduled_at_stall = FAULT_AT + LEAD                  # what the sender had sent when it stalled
+    skipped = [t for t in run.window_starts if scheduled_at_stall - 1e-9 <= t < when + LEAD - 1e-9]
+    assert not skipped, skipped
+    assert any(abs(t - (when + LEAD)) < 1e-9 for t in run.window_starts)
