@@ -7,20 +7,20 @@ discovered, so adding a command means adding a module.
 
 from __future__ import annotations
 
+# Only the standard library at import time: the console script imports this module before main() runs, and
+# a Ctrl-C during the ~1 s of numpy/numba/rclpy imports must come out as "interrupted" (status 130), not as
+# a KeyboardInterrupt traceback. The commands and what they need are imported inside main().
 import argparse
-import atexit
 import contextlib
 import importlib
 import os
 import pkgutil
+import signal
 import sys
 import warnings
 from typing import TextIO
 
-from ..compile_notice import announce_kernel_compiles
-from ..physics.parameters import ParameterError
-from ..settings import SettingsError
-
+INTERRUPTED = 130   # exit status after Ctrl-C (128 + SIGINT, as a shell reports it)
 COMMAND_ORDER = ('run', 'simulate', 'sweep', 'optimize', 'calibrate', 'contact', 'hil', 'info', 'plot', 'export',
                  'recover', 'replay', 'resim')
 
@@ -58,21 +58,44 @@ _default_show_warning = warnings.showwarning
 
 def main(argv: list[str] | None = None) -> int:
     """Run one command. A user mistake (bad option, parameter, path or file) is one line on stderr and exit
-    status 2; Ctrl-C is ``interrupted`` and status 130, never a traceback. Called as the program (no
-    ``argv``), Ctrl-C ends the process at once (:func:`exit_interrupted`)."""
+    status 2; Ctrl-C is ``interrupted`` and status 130, never a traceback.
+
+    Called as the console script (``argv`` None: the process is this command's), Ctrl-C while the commands
+    are imported (~1 s of numpy, numba, rclpy; several under load) ends the process at once, as the node
+    executables do (nodes/launcher.py): nothing has been done that needs undoing, and the interpreter's
+    finalisation of half-imported modules took 1-3 s at load 10. And a command that ran ROS nodes, or
+    that was interrupted, leaves with ``os._exit`` once its output is flushed (:func:`leave`)."""
+    console = argv is None
+    # A process started with Ctrl-C ignored (a background job of a script) keeps ignoring it.
+    quick_exit = console and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    if quick_exit:
+        signal.signal(signal.SIGINT, _interrupted_while_starting)
+    status = _run(argv, quick_exit)
+    if console and (_ros_used or status == INTERRUPTED):
+        leave(status)
+    return status
+
+
+def _interrupted_while_starting(_signum: int, _frame: object) -> None:
+    os.write(2, b'micro-feeder: interrupted\n')
+    os._exit(INTERRUPTED)
+
+
+def _run(argv: list[str] | None, quick_exit: bool = False) -> int:
     command = 'micro-feeder'
     try:
+        from ..compile_notice import announce_kernel_compiles
         warnings.showwarning = _show_warning
         announce_kernel_compiles(lambda line: print(f'micro-feeder: {line}', file=sys.stderr, flush=True))
         parser = build_parser()
         args = parser.parse_args(argv)
         command = f'micro-feeder {args.command}'
+        if quick_exit:  # from here on, Ctrl-C is the command's to handle (KeyboardInterrupt or its own)
+            signal.signal(signal.SIGINT, signal.default_int_handler)
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
         print(f'{command}: interrupted', file=sys.stderr)
-        if argv is None:
-            exit_interrupted(130)
-        return 130
+        return INTERRUPTED
     except Exception as err:  # user mistakes are classified here, once, for every command
         reason = user_error(err)
         if reason is None:
@@ -81,14 +104,26 @@ def main(argv: list[str] | None = None) -> int:
         return 2
 
 
-def exit_interrupted(status: int) -> None:
-    """End the program now, after Ctrl-C: the exit handlers run (child processes are stopped, logging is
-    flushed) and the output is flushed, but the interpreter's teardown of every module is skipped: 0.25 s
-    with numba loaded on an idle machine, up to 0.6 s on a loaded one, which made Ctrl-C late. Whatever the
-    command holds open was closed when the interrupt unwound it."""
-    atexit._run_exitfuncs()
+_ros_used = False   # set by cli._session.ros_session once its rclpy context is shut down
+
+
+def ros_done() -> None:
+    """Called when a command's ROS session has been shut down: see :func:`leave`."""
+    global _ros_used
+    _ros_used = True
+
+
+def leave(status: int) -> None:
+    """End the process now, without the interpreter's finalisation: after a ROS session, or after Ctrl-C.
+    Everything the command had to undo is undone by then, in its ``with`` and ``finally`` blocks (nodes
+    destroyed, the rclpy context shut down, Fast DDS's participant and its shared memory released, logs and
+    tables closed, worker processes killed and joined). What finalisation still did took 1-4 s at load
+    5-12 on 2 cores, over 8 s at times (garbage collection of numba's, scipy's and rclpy's modules, OpenBLAS
+    joining its threads at exit), all the while ignoring Ctrl-C: the "hang on shutdown" of issue 30, and
+    most of a sweep's answer to Ctrl-C (1.5 s at load 10, where 0.1 s was the sweep's own). The node
+    executables leave the same way (nodes/launcher.py)."""
     for stream in (sys.stdout, sys.stderr):
-        with contextlib.suppress(Exception):
+        with contextlib.suppress(OSError, ValueError):     # a closed pipe: nothing more can be said there
             stream.flush()
     os._exit(status)
 
@@ -96,6 +131,8 @@ def exit_interrupted(status: int) -> None:
 def user_error(err: Exception) -> str | None:
     """The one-line reason when ``err`` is a user's mistake (refused value, path, file, parameters that
     make the simulation fail), else None (a bug: the traceback is shown)."""
+    from ..physics.parameters import ParameterError
+    from ..settings import SettingsError
     if isinstance(err, (CommandError, SettingsError, ParameterError)):
         return str(err)
     if isinstance(err, OSError):

@@ -74,6 +74,8 @@ class RosSession:
         Build it with ``namespace=session.namespace`` (``--namespace``)."""
         from ..nodes.spin import NodeRefused
         from ..physics.dynamics import SimulationError
+        if self.stop:       # Ctrl-C during start-up: build nothing more (the command ends "interrupted")
+            raise KeyboardInterrupt
         try:
             node = build()
         except (ParameterError, ValueError, FileExistsError, SimulationError, NodeRefused) as err:
@@ -124,7 +126,10 @@ class RosSession:
 def ros_session(record: str | None = None, namespace: str = '/', viewer: Any = None) -> Iterator[RosSession]:
     """A :class:`RosSession` whose nodes go in ``namespace``; ROS traffic stays on this host unless
     ROS_AUTOMATIC_DISCOVERY_RANGE is set. The process gets the simulator loop's GIL switch interval.
-    ``viewer`` (``cli._foxglove.live_view``) is given every node built."""
+    ``viewer`` (``cli._foxglove.live_view``) is given every node built. Fast DDS shared-memory files of dead
+    processes are removed first (:mod:`micro_feeder.nodes.fastdds_shm`). Run as the console script, the
+    command leaves without the interpreter's finalisation once the session is shut down
+    (:func:`micro_feeder.cli.leave`)."""
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     from ..realtime.loop import GIL_SWITCH_INTERVAL
     sys.setswitchinterval(GIL_SWITCH_INTERVAL)
@@ -133,7 +138,10 @@ def ros_session(record: str | None = None, namespace: str = '/', viewer: Any = N
     from rclpy.signals import SignalHandlerOptions
 
     from ..nodes._ros import StopFlag
+    from ..nodes.fastdds_shm import remove_stale_files
+    from . import ros_done
 
+    remove_stale_files()
     context = Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
     session = None
@@ -147,3 +155,4 @@ def ros_session(record: str | None = None, namespace: str = '/', viewer: Any = N
             for node in session.nodes:
                 node.destroy_node()
         rclpy.shutdown(context=context)
+        ros_done()

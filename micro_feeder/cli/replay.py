@@ -8,7 +8,7 @@ import os
 import re
 import signal
 
-from . import CommandError
+from . import CommandError, ros_done
 from ._foxglove import add_foxglove_option, announce, live_view
 
 DEFAULT_WAIT_TIMEOUT = 30.0  # s (the replay node's wait_for_subscribers_timeout default)
@@ -91,14 +91,17 @@ def run(args: argparse.Namespace) -> int:
     if args.namespace:
         ros_args += ['-r', f'__ns:=/{args.namespace.strip("/")}']
     argv = ['replay', '--ros-args', *ros_args]
-    with live_view(args.foxglove) as viewer:
-        if viewer is None:
-            return _status(replay_main(argv))
+    try:
+        with live_view(args.foxglove) as viewer:
+            if viewer is None:
+                return _status(replay_main(argv))
 
-        def tap(node: object) -> None:
-            viewer.tap(node)
-            announce(viewer)
-        return _status(replay_main(argv, tap=tap))
+            def tap(node: object) -> None:
+                viewer.tap(node)
+                announce(viewer)
+            return _status(replay_main(argv, tap=tap))
+    finally:
+        ros_done()      # the player shut its rclpy context down: the console script leaves at once
 
 
 def _status(status: int) -> int:

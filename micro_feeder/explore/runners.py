@@ -28,6 +28,7 @@ from typing import Any
 PR_SET_PDEATHSIG = 1
 POOL_RESTARTS = 2
 TASK_RETRIES = 2
+MANAGER_JOIN_TIMEOUT = 5.0     # s: the pool's manager thread ends within ms once its workers are dead
 
 
 class RunnerError(RuntimeError):
@@ -121,10 +122,18 @@ class LocalProcesses(Runner):
             yield result
 
     def _terminate(self) -> None:
+        """Kill the workers, then wait (bounded) for the pool's manager thread to end. Left running, that
+        thread met concurrent.futures' exit hook, which wakes and joins it at interpreter exit: it either
+        raced the thread's own clean-up (``OSError: [Errno 9] Bad file descriptor`` from ``_python_exit``,
+        a traceback after ``interrupted``) or joined it forever, the thread being blocked reading a result a
+        killed worker had half written (the result pipe stays open through this process's own write end)."""
         pool, self._pool = self._pool, None
         if pool is None:
             return
+        # what shutdown() drops its references to
         processes = list((getattr(pool, '_processes', None) or {}).values())
+        manager = getattr(pool, '_executor_manager_thread', None)
+        results = getattr(pool, '_result_queue', None)
         pool.shutdown(wait=False, cancel_futures=True)
         for process in processes:
             with contextlib.suppress(Exception):
@@ -134,6 +143,14 @@ class LocalProcesses(Runner):
                 process.join(timeout=1.0)
                 if process.is_alive():
                     process.kill()
+                    process.join(timeout=1.0)
+        # Every writer of the result pipe is dead: closing ours lets a read of a half-written result end
+        # (EOF: the pool is broken, and the manager thread winds down).
+        if results is not None:
+            with contextlib.suppress(Exception):
+                results._writer.close()
+        if manager is not None:
+            manager.join(timeout=MANAGER_JOIN_TIMEOUT)
 
     def close(self) -> None:
         self._terminate()

@@ -11,6 +11,7 @@ handlers and spins in slices of ``SPIN_SLICE`` seconds, checking a stop flag in 
 from __future__ import annotations
 
 import importlib
+import os
 import signal
 from collections.abc import Callable
 from typing import Any
@@ -52,7 +53,8 @@ def qos_from_dict(profile: dict[str, Any], default: QoSProfile) -> QoSProfile:
 
 
 class StopFlag:
-    """Set by SIGINT/SIGTERM (after :meth:`install`) or by :meth:`set`."""
+    """Set by SIGINT/SIGTERM (after :meth:`install`) or by :meth:`set`. A second signal ends the process at
+    once (status 128 + signal): whatever the clean stop is waiting for, Ctrl-C is never ignored."""
 
     def __init__(self) -> None:
         self.signal: int | None = None
@@ -64,6 +66,9 @@ class StopFlag:
         return self
 
     def _handle(self, signum: int, _frame: Any) -> None:
+        if self.signal is not None:
+            os.write(2, f'{signal.Signals(signum).name} again: leaving at once\n'.encode())
+            os._exit(128 + signum)
         self.signal = signum
         self.requested = True
 

@@ -44,6 +44,7 @@ from ..logs.metadata import parse_qos, read_qos_overrides
 from ..logs.reader import LogMessage, LogReader
 from ..progress import Progress
 from ._ros import StopFlag, message_class, qos_from_dict, spin_until
+from .fastdds_shm import remove_stale_files
 
 DEFAULT_QOS = QoSProfile(depth=100)
 # rosbag2's /clock publisher (rclcpp::ClockQoS): best effort, volatile, keep last 1.
@@ -320,6 +321,7 @@ def main(args: list[str] | None = None, tap: Callable[[Node], None] | None = Non
     node before it plays (``micro-feeder replay --foxglove``). Exit status: 0 at the end of the replay, 128 +
     the signal number when SIGINT (130) or SIGTERM (143) stopped it, 1 when the wait for subscribers timed
     out or the player died, 2 for a refused parameter or nothing to publish."""
+    remove_stale_files()
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     stop = StopFlag().install()
     try:

@@ -25,6 +25,7 @@ from ..compile_notice import announce_kernel_compiles
 from ..physics.dynamics import SimulationError
 from ..physics.parameters import ParameterError
 from ._ros import SPIN_SLICE, StopFlag, spin_until
+from .fastdds_shm import remove_stale_files
 
 
 def spin_nodes(nodes: list[Node], done: Callable[[], bool], context: Context | None = None) -> None:
@@ -39,10 +40,12 @@ def spin_nodes(nodes: list[Node], done: Callable[[], bool], context: Context | N
 
 
 def init_ros(name: str, args: list[str] | None) -> StopFlag | None:
-    """``rclpy.init(args)`` for a console script, with SIGINT/SIGTERM setting the returned stop flag.
+    """``rclpy.init(args)`` for a console script, with SIGINT/SIGTERM setting the returned stop flag, after
+    removing the Fast DDS shared-memory files of dead processes (:mod:`.fastdds_shm`).
     ``--ros-args`` rcl cannot read (``-p surface.centers:=[0,0.002]``: an integer in a float list) print
     one line with the reason and give None (exit status 2), not an RCLError traceback."""
     stop = StopFlag().install()
+    remove_stale_files()
     try:
         rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except RCLError as err:
