@@ -30,14 +30,14 @@ from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
 
 from micro_feeder.interface import messages, stamps
-from micro_feeder.interface.names import joint_names
+from micro_feeder.interface.names import joint_names, receipt_frame
 from micro_feeder.interface.transitions import TransitionEncoder
 from micro_feeder.logs.writer import LogWriter
 from micro_feeder.physics.waveforms import StrokeParams
 from micro_feeder.settings import model_specs
 from micro_feeder.sim.commands import parse_trajectory_cdr
 from micro_feeder.sim.stepper import Stepper, build_model
-from micro_feeder.sim.stream import StrokeStream, encoded_window
+from micro_feeder.sim.stream import StrokeStream, encode_window
 
 STEP = 1e-3                 # s: the simulator's default step_period
 LEAD, WINDOW = 0.2, 0.02    # s: the actuator's default stream.lead and stream.window
@@ -137,10 +137,12 @@ def write_long_log(path: Path | str, seconds: float, *, markers: bool = True, pr
         # the actuator hears this step's joint state and keeps LEAD of strokes ahead; the simulator receives
         # each window before its next step (receipt = this step's sim time)
         while stream.scheduled_until < stepper.t + LEAD:
-            data = encoded_window(stream)
+            command_id = f'/actuator@long_log:b1:w{counts["windows"] + 1}'
+            data = encode_window(stream.next_window(), command_id)
             writer.write('/actuator/trajectory', data, log_ns(i, k := k + 1))
             stepper.command_trajectory(parse_trajectory_cdr(data, names, stepper.limits))
-            writer.write('/simulator/command_receipts', messages.header_bytes(stepper.t, 'actuator/trajectory'),
+            writer.write('/simulator/command_receipts',
+                         messages.header_bytes(stepper.t, receipt_frame('actuator/trajectory', command_id)),
                          log_ns(i, k := k + 1))
             counts['windows'] += 1
         if progress and not i % 10_000:
