@@ -217,6 +217,7 @@ def track_scenarios(draw: st.DrawFn) -> dict[str, object]:
         'surface.kind': 'track', 'track.inclination': draw(st.floats(-0.3, 0.3)), 'track.vibration_angle': beta,
         'contact.model': draw(st.sampled_from(['coulomb', 'ke'])), 'contact.mu': draw(st.floats(0.1, 1.0)),
         'landing.law': draw(st.sampled_from(['keep', 'coulomb', 'stick'])),
+        'landing.restitution': draw(st.sampled_from([0.0, draw(st.floats(0.0, 0.8))])),
         'stroke.waveform': waveform, 'stroke.count': draw(st.integers(1, 6)), 'stroke.frequency': frequency,
         'stroke.amplitude': draw(st.floats(5e-6, 150e-6)),
         'stroke.duty': draw(st.floats(0.1, 0.9)), 'stroke.delay': draw(st.sampled_from([0.0, 1e-3])),

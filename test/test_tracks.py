@@ -158,3 +158,30 @@ def test_the_mean_velocity_converges_with_the_tolerance(regime: str, gamma: floa
     assert coarse['mean_velocity_mps'] != 0.0
     assert fine['mean_velocity_mps'] == pytest.approx(coarse['mean_velocity_mps'], rel=1e-4)
     assert coarse['transitions']['take_off'] > 0 if regime == 'flies' else coarse['transitions']['take_off'] == 0
+
+
+def test_a_bouncing_part_lands_at_the_free_fall_times_and_its_chatter_ends() -> None:
+    """landing.restitution e: dropped from h0 on a still track, the part lands at t_1 = sqrt(2 h0 / g) and
+    then after flights of 2 e^k v_1 / g (each impact within the event tolerance of its time, accumulating); a bounce whose flight would last less than 1000 event tolerances is
+    plastic, so the chatter ends, in contact, before t_1 + 2 e v_1 / (g (1 − e))."""
+    from micro_feeder.physics.dynamics import FeederModel
+
+    e, h0 = 0.6, 1e-4
+    model = FeederModel.from_settings({'surface.kind': 'track', 'contact.model': 'coulomb', 'stroke.amplitude': 0.0,
+                                       'landing.restitution': e, 'particle.x0': 0.0})
+    state = model.flying_state(0.0, h0, 0.0, 0.0)
+    events = model.advance(state, 0.05)
+    landings = [ev.t for ev in events if ev.kind == 'landing']
+    g = G * math.cos(0.0)
+    t1 = math.sqrt(2 * h0 / g)
+    v1 = g * t1
+    expected = [t1]
+    while 2 * e ** len(expected) * v1 / g >= 1000 * model.integration.event_tolerance:
+        expected.append(expected[-1] + 2 * e ** len(expected) * v1 / g)
+    assert len(landings) == len(expected), (len(landings), len(expected))
+    # each impact is located within the event tolerance (1e-9 s) and the next flight starts from there
+    errors = [abs(got - want) for got, want in zip(landings, expected, strict=True)]
+    assert all(err <= 2e-9 * (k + 1) for k, err in enumerate(errors)), errors
+    assert state.mode == 'stuck' and landings[-1] < t1 + 2 * e * v1 / (g * (1 - e))
+    counts = state.transitions
+    assert counts['landing'] == len(expected) and counts['take_off'] == len(expected) - 1   # the bounces

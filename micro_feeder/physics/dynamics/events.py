@@ -11,6 +11,7 @@ from .._jit import jit, jit_inline
 from ..waveforms import channel_bounds
 from .layout import (
     AUX_L,
+    AUX_N,
     AUX_QMAX,
     AUX_ROOT_SLOPE,
     AUX_T_REQ,
@@ -293,6 +294,19 @@ def enter(iv: np.ndarray, fs: np.ndarray, t: float, new_mode: int, counter: int,
     fs[FS_T_ENTRY] = t
 
 
+@jit_inline
+def bounce_flight(rebound: float, x: float, xd: float, st: np.ndarray, base_acc: float, model: KernelModel,
+                  aux: np.ndarray) -> float:
+    """How long (s) a bounce leaving the surface at ``rebound`` (m/s, normal) would fly, from the normal
+    acceleration A = N L / m that pushes the part onto the surface there: 2 rebound / A (inf where A ≤ 0:
+    the surface falls away faster than the part). Successive bounces on a surface that moves little during
+    them lose a factor e_n each, so their flights fall below ``bounce_min_flight`` after finitely many, and
+    the last landing is plastic: chatter ends in finite time (at most the first flight / (1 − e_n) in all)."""
+    contact_load(x, xd, st, base_acc, model, aux)
+    pressing = aux[AUX_N] * aux[AUX_L] / model.mass
+    return 2.0 * rebound / pressing if pressing > 0.0 else math.inf
+
+
 @jit
 def transition(which: int, t: float, y: np.ndarray, model: KernelModel, src: tuple, cur: np.ndarray,
                st: np.ndarray, aux: np.ndarray, iv: np.ndarray, fs: np.ndarray, grazing: bool) -> int:
@@ -300,16 +314,27 @@ def transition(which: int, t: float, y: np.ndarray, model: KernelModel, src: tup
     the event kind. ``y`` is rewritten for the new mode."""
     mode = iv[IV_MODE]
     base_acc = strokes_at(t, y, model, src, cur, st, aux, 0.0)
-    if mode == FLYING:                                     # landing: landing.law
-        _h, hx, _hxx, ht, _htt, _hxt = surface_here(y[0], st, model, aux)
+    if mode == FLYING:                                     # landing: landing.law, landing.restitution
+        h, hx, _hxx, ht, _htt, _hxt = surface_here(y[0], st, model, aux)
+        length = math.sqrt(1.0 + hx * hx)
+        approach = abs(y[3] - ht - hx * y[1]) / length     # normal velocity relative to the surface (m/s)
         surface_vz = ht if model.landing_relative else 0.0
         xd = (y[1] + hx * (y[3] - surface_vz)) / (1.0 + hx * hx)
         if model.landing_law == LANDING_STICK:
             xd = 0.0
-        elif model.landing_law == LANDING_COULOMB:     # |Δv_t| ≤ μ |Δv_n|: the normal velocity lost, relative
-            length = math.sqrt(1.0 + hx * hx)
-            normal_lost = abs(y[3] - ht - hx * y[1]) / length
-            xd = sign(xd) * max(abs(xd) - model.landing_mu * normal_lost / length, 0.0)
+        elif model.landing_law == LANDING_COULOMB:     # |Δv_t| ≤ μ |Δv_n|, Δv_n = (1 + e_n)·approach
+            impulse = (1.0 + model.restitution) * approach
+            xd = sign(xd) * max(abs(xd) - model.landing_mu * impulse / length, 0.0)
+        rebound = model.restitution * approach
+        if rebound > 0.0 and bounce_flight(rebound, y[0], xd, st, base_acc, model, aux) >= model.bounce_min_flight:
+            y[1] = xd - hx * rebound / length              # tangential xd·L along the surface, rebound along n
+            y[2] = h
+            y[3] = ht + hx * xd + rebound / length
+            iv[IV_FRESH] = 1
+            enter(iv, fs, t, FLYING, IV_LANDING, grazing)
+            if not grazing:
+                iv[IV_TAKE_OFF] += 1                       # a bounce: a landing and a take-off at one instant
+            return LANDING
         y[1] = xd
         y[2] = 0.0
         y[3] = 0.0

@@ -51,6 +51,8 @@ class KernelModel(NamedTuple):
     shake: float                # track: cos β, the tangential part of the vibration (0 for bumps)
     slope_acc: float            # track: g sin α, gravity along the track (m/s², 0 for bumps)
     landing_mu: float           # landing law coulomb: μ of the tangential impulse
+    restitution: float          # normal restitution e_n at a landing (0: plastic)
+    bounce_min_flight: float    # s: a bounce whose flight would be shorter is plastic (chatter ends)
     adaptive: bool              # DOPRI5 (else fixed-step RK4)
     threshold: bool             # the seed's threshold-velocity friction logic (else exact events)
     dip_search: bool            # event_search 'dips': margins' minima inside steps are searched

@@ -189,6 +189,9 @@ class RunResult:
                 **{k: None if math.isnan(v) else v for k, v in self.conveying.items()}}
 
 
+BOUNCE_MIN_FLIGHT_EVENT_TOLERANCES = 1000   # a bounce shorter than this many event tolerances is plastic
+
+
 @dataclass(frozen=True)
 class FeederModel:
     """Immutable particle-on-surface model (parameters, contact tables, packed kernel inputs).
@@ -228,7 +231,9 @@ class FeederModel:
             piezo_omega=piezo.omega_n, piezo_zeta=piezo.damping, piezo_min=piezo.stroke_min,
             piezo_max=piezo.stroke_max, lift=math.sin(beta) if track else 0.0,
             shake=math.cos(beta) if track else 0.0,
-            slope_acc=self.particle.gravity * math.sin(alpha) if track else 0.0, landing_mu=self.contact.mu)
+            slope_acc=self.particle.gravity * math.sin(alpha) if track else 0.0, landing_mu=self.contact.mu,
+            restitution=self.landing.restitution,
+            bounce_min_flight=BOUNCE_MIN_FLIGHT_EVENT_TOLERANCES * integration.event_tolerance)
         flags = dict(
             adaptive=integration.method == 'dopri5', threshold=integration.friction_logic == 'threshold',
             dip_search=integration.event_search == 'dips', convective=integration.convective_terms,

@@ -62,6 +62,10 @@ class LandingParams(ParameterGroup):
     law: str = param('keep', "tangential velocity at a landing: 'keep' it (the seed's rule); 'coulomb': it changes "
                      'by at most contact.mu times the normal velocity lost (a Coulomb impulse); '
                      "'stick': the part takes the surface's", choices=LANDING_LAWS)
+    restitution: float = param(0.0, 'normal restitution e_n: the part leaves the surface again with e_n times '
+                               'the normal velocity it arrived with (0: it stays down); a bounce whose flight would '
+                               'last less than integration.event_tolerance x 1000 is plastic, so chatter ends',
+                               '', ge=0.0, lt=1.0)
     velocity: str = param('relative', "'relative': keep the tangential velocity relative to the surface; "
                           "'absolute': keep the tangential component of the absolute velocity (seed)",
                           choices=LANDING_VELOCITIES)
