@@ -162,8 +162,9 @@ def test_the_mean_velocity_converges_with_the_tolerance(regime: str, gamma: floa
 
 def test_a_bouncing_part_lands_at_the_free_fall_times_and_its_chatter_ends() -> None:
     """landing.restitution e: dropped from h0 on a still track, the part lands at t_1 = sqrt(2 h0 / g) and
-    then after flights of 2 e^k v_1 / g (each impact within the event tolerance of its time, accumulating); a bounce whose flight would last less than 1000 event tolerances is
-    plastic, so the chatter ends, in contact, before t_1 + 2 e v_1 / (g (1 − e))."""
+    then after flights of 2 e^k v_1 / g (each impact within the event tolerance of its time, accumulating);
+    a bounce whose flight would last less than 1000 event tolerances is plastic, so the chatter ends, in
+    contact, before t_1 + 2 e v_1 / (g (1 − e))."""
     from micro_feeder.physics.dynamics import FeederModel
 
     e, h0 = 0.6, 1e-4
