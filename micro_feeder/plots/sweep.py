@@ -31,7 +31,7 @@ REGIME_LABEL = {'stuck': 'stays stuck', 'slides': 'slides (in contact)', 'flies'
 # (factor, unit label) by SI unit, largest unit first: the first that shows the largest value ≥ 1 is used.
 SCALES = {'m': [(1e3, 'mm'), (1e6, 'µm'), (1e9, 'nm')], 'Hz': [(1e-6, 'MHz'), (1e-3, 'kHz'), (1.0, 'Hz')],
           'kg': [(1e6, 'mg'), (1e9, 'µg'), (1e12, 'ng')], 'N': [(1e3, 'mN'), (1e6, 'µN'), (1e9, 'nN')],
-          's': [(1.0, 's'), (1e3, 'ms'), (1e6, 'µs')]}
+          's': [(1.0, 's'), (1e3, 'ms'), (1e6, 'µs')], 'm/s': [(1.0, 'm/s'), (1e3, 'mm/s'), (1e6, 'µm/s')]}
 
 
 def unit_scale(unit: str, values: Sequence[float] | np.ndarray) -> tuple[float, str]:
@@ -91,6 +91,11 @@ def plot_sweep_table(table: Path, plan: RunPlan, path: Path | str, summary: Sequ
         return plot_curve(names[0], data, path, setting)
     if len(names) == 2:
         regime_index = np.array([list(REGIME_STYLE).index(r) if r in REGIME_STYLE else -1 for r in data['regime']])
+        velocity = data.get('mean_velocity_mps')
+        if velocity is not None and np.isfinite(velocity).any():     # a conveying velocity: maps as papers do
+            return plot_map(names, data, velocity, regime_index, path, 'Mean conveying velocity (whole periods '
+                            "of the burst's second half)", setting, gridded=plan.design.kind == 'grid',
+                            quantity=('mean velocity', 'm/s'))
         distance = np.where(data['settled'], data['distance_per_stroke_m'], np.nan)
         return plot_map(names, data, distance, regime_index, path, 'Distance per stroke', setting,
                         gridded=plan.design.kind == 'grid')
@@ -143,14 +148,14 @@ def _regime_of_fractions(cols: dict[str, np.ndarray]) -> np.ndarray:
 
 def plot_map(names: Sequence[str], data: dict[str, np.ndarray], value: str | np.ndarray,
              regime_index: np.ndarray, path: Path | str, title: str, context: str = '',
-             gridded: bool = True) -> Path:
-    """Heat map of distance per stroke over two parameters (symmetric log colour scale: micrometres of
-    creep and millimetres of flight on one map), regime boundaries drawn as lines, cells with no
-    distance (the part not at rest) hatched."""
+             gridded: bool = True, quantity: tuple[str, str] = ('distance per stroke', 'm')) -> Path:
+    """Heat map of ``quantity`` (what, SI unit; distance per stroke by default) over two parameters
+    (symmetric log colour scale: micrometres of creep and millimetres of flight on one map), regime
+    boundaries drawn as lines, cells with no value (the part not at rest) hatched."""
     values = data[value] if isinstance(value, str) else value
     x, xlabel = _scaled(names[0], data[names[0]])
     y, ylabel = _scaled(names[1], data[names[1]])
-    factor, unit = unit_scale('m', values)
+    factor, unit = unit_scale(quantity[1], values)
     z = values * factor
     finite = np.abs(z[np.isfinite(z)])
     top = max(finite.max(), 1e-3) if finite.size else 1.0
@@ -176,10 +181,11 @@ def plot_map(names: Sequence[str], data: dict[str, np.ndarray], value: str | np.
             ax.scatter(x[sel], y[sel], marker=marker, facecolors='none', edgecolors=color, s=60, lw=0.6,
                        label=regime)
         ax.add_artist(ax.legend(fontsize=8, title='regime', loc='upper left'))
-    bar = fig.colorbar(mesh, ax=ax, label=f'distance per stroke ({unit})')
+    bar = fig.colorbar(mesh, ax=ax, label=f'{quantity[0]} ({unit})')
     bar.set_ticks(symlog_ticks(norm.linthresh, top))
     if not np.isfinite(z).all():
-        label = 'part not at rest when the run ended: no distance'
+        label = ('part not at rest when the run ended: no distance' if quantity[1] == 'm' else
+                 'no value (a run shorter than the burst, or one stroke)')
         handle = (Patch(facecolor='none', edgecolor='0.5', hatch='///', label=label) if gridded else
                   Line2D([], [], marker='x', color='0.4', ls='none', label=label))
         ax.legend(handles=[handle], fontsize=8, loc='lower right')
