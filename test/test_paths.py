@@ -209,11 +209,16 @@ def test_every_path_moves_the_part_the_same(scenario: dict[str, object]) -> None
 
 @st.composite
 def track_scenarios(draw: st.DrawFn) -> dict[str, object]:
-    """A vibratory track (issue 27): any waveform, inclination, vibration angle, contact and landing law."""
+    """A vibratory track (issue 27): either drive, any waveform, inclination, vibration angle, contact and
+    landing law."""
     waveform = draw(st.sampled_from([w for w in WAVEFORMS if w != 'samples']))
     beta = draw(st.floats(0.05, 1.3))
     frequency = draw(st.floats(50.0, 400.0))     # with 5-150 µm: throw numbers ~0.03-90, stick, slide and hop
+    two_way = draw(st.booleans())
+    drive = {'track.drive': 'two_way', 'surface.centers': [0.0, 0.0], 'surface.widths': [1e-3, 1e-3],
+             'stroke.phases': [0.0, draw(st.floats(0.0, 1.0))]} if two_way else {}
     return {
+        **drive,
         'surface.kind': 'track', 'track.inclination': draw(st.floats(-0.3, 0.3)), 'track.vibration_angle': beta,
         'contact.model': draw(st.sampled_from(['coulomb', 'ke'])), 'contact.mu': draw(st.floats(0.1, 1.0)),
         'landing.law': draw(st.sampled_from(['keep', 'coulomb', 'stick'])),

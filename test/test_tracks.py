@@ -186,3 +186,38 @@ def test_a_bouncing_part_lands_at_the_free_fall_times_and_its_chatter_ends() -> 
     assert state.mode == 'stuck' and landings[-1] < t1 + 2 * e * v1 / (g * (1 - e))
     counts = state.transitions
     assert counts['landing'] == len(expected) and counts['take_off'] == len(expected) - 1   # the bounces
+
+
+def _two_way(u: float, z: float, phi: float, mu: float, count: int) -> list[str]:
+    """A two-way drive: the track moves along itself at velocity U cos ωt (x_p = (U/ω) sin ωt) and normal to
+    itself as Z cos(ωt − φ), Coulomb friction μ."""
+    along = u / OMEGA
+    beta = math.atan2(z, along)
+    amplitude = math.hypot(along, z)                    # x_p = A cos β sin ωt, z_p = A sin β sin(ωt − 2π p)
+    phase = ((phi - math.pi / 2) / (2 * math.pi)) % 1.0  # sin(ωt − 2π p) = cos(ωt − φ)
+    settings = {'surface.kind': 'track', 'track.drive': 'two_way', 'track.vibration_angle': beta,
+                'surface.centers': [0.0, 0.0], 'surface.widths': [1e-3, 1e-3], 'stroke.phases': [0.0, phase],
+                'contact.model': 'coulomb', 'contact.mu': mu, 'stroke.waveform': 'sine',
+                'stroke.frequency': FREQUENCY, 'stroke.amplitude': amplitude, 'stroke.count': count}
+    return [arg for name, value in settings.items() for arg in ('--set', f'{name}={value!r}')]
+
+
+def coulomb_pump_velocity(u: float, z: float, phi: float) -> float:
+    """Fast-vibration limit of the Coulomb pump: v̄ = −U sin δ with δ = ε cos δ, ε = (Zω²/g) cos φ."""
+    eps = z * OMEGA ** 2 / G * math.cos(phi)
+    delta = brentq(lambda d: d - eps * math.cos(d), -math.pi / 2, math.pi / 2, xtol=1e-15)
+    return -u * math.sin(delta)
+
+
+@pytest.mark.parametrize('phi', [0.0, math.pi / 3, 2.0])
+def test_a_two_way_drive_pumps_as_coulomb_and_reverses_with_the_phase(phi: float) -> None:
+    """Reznik & Canny's Coulomb pump: a part always sliding (track acceleration ≫ μg), never flying
+    (Zω² < g), conveys at the fast-vibration limit within O(μg/(Uω)) of U, backward at φ = 0; shifting the
+    normal motion by half a period mirrors the motion, so v̄(φ + π) = −v̄(φ)."""
+    u, z, mu, count = 0.2, 0.5 * G / OMEGA ** 2, 0.2, 400     # relaxation πU/(2μg) = 0.16 s, 40 periods
+    forward = _simulate(_two_way(u, z, phi, mu, count), count / FREQUENCY)
+    reverse = _simulate(_two_way(u, z, phi + math.pi, mu, count), count / FREQUENCY)
+    assert forward['transitions']['take_off'] == 0 and reverse['transitions']['take_off'] == 0
+    v = forward['mean_velocity_mps']
+    assert reverse['mean_velocity_mps'] == pytest.approx(-v, rel=1e-4)
+    assert v == pytest.approx(coulomb_pump_velocity(u, z, phi), abs=3 * mu * G / OMEGA)

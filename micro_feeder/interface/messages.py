@@ -206,8 +206,11 @@ class SurfaceMarkers:
         xs = np.asarray(xs, dtype=float)
         self._part_size = part_size
         # (points, actuators); a track (``track_lift`` = sin β) is flat at s sin β, drawn around the part
-        self._basis = surface_profile(xs, np.eye(len(centers)), centers, widths) if track_lift is None else \
-            np.full((xs.size, 1), track_lift)
+        if track_lift is None:
+            self._basis = surface_profile(xs, np.eye(len(centers)), centers, widths)
+        else:                   # the last actuator moves the track normal to its surface (either drive)
+            self._basis = np.zeros((xs.size, len(centers)))
+            self._basis[:, -1] = track_lift
         self._around_part = None if track_lift is None else xs - float(np.mean(xs))
         self._line = np.zeros((xs.size, 3))                                          # x, y, z per point
         self._line[:, 0] = xs

@@ -17,6 +17,7 @@ from ._jit import jit_inline
 from .parameters import ParameterError, ParameterGroup, param
 
 SURFACE_KINDS = ('bumps', 'track')
+TRACK_DRIVES = ('line', 'two_way')
 
 
 @dataclass(frozen=True)
@@ -32,6 +33,10 @@ class TrackParams(ParameterGroup):
     vibration_angle: float = param(0.5235987755982988, 'angle beta of the vibration line to the track surface '
                                    '(x_p = s cos beta, z_p = s sin beta)', 'rad', ge=-1.5707963267948966,
                                    le=1.5707963267948966)
+    drive: str = param('line', "'line': one stroke s along the vibration line (one actuator); 'two_way': two "
+                       'actuators, the first moving the track along its surface (x_p = s_0 cos beta), the second '
+                       'normal to it (z_p = s_1 sin beta), each with its stroke.phases entry: the phase between '
+                       'the two motions', choices=TRACK_DRIVES)
 
 
 @dataclass(frozen=True)
@@ -56,9 +61,10 @@ class SurfaceParams(ParameterGroup):
         if len(self.widths) != len(self.centers):
             raise ParameterError('surface.widths', list(self.widths),
                                  f'one width per actuator ({len(self.centers)} surface.centers)')
-        if self.kind == 'track' and len(self.centers) != 1:
+        if self.kind == 'track' and len(self.centers) > 2:
             raise ParameterError('surface.centers', list(self.centers),
-                                 "a track (surface.kind 'track') moves as one body: one actuator, one centre")
+                                 "a track (surface.kind 'track') moves as one body: one actuator (track.drive "
+                                 "'line') or two (track.drive 'two_way'), one centre each")
         if any(b < a for a, b in zip(self.centers, self.centers[1:], strict=False)):
             raise ParameterError('surface.centers', list(self.centers),
                                  'actuators listed in increasing order along the feeder (list them by position, '

@@ -84,7 +84,7 @@ class FeederScene:
             xs, heights = self.xs, surface_profile(self.xs, strokes, self.centers, self.widths)
         else:
             xs = x + self.xs - float(np.mean(self.xs))
-            heights = np.full(xs.size, self.track_lift * float(strokes[0]))
+            heights = np.full(xs.size, self.track_lift * float(strokes[-1]))   # the normal motion's actuator
         surface = SceneEntity(timestamp=stamp, frame_id=FEEDER_FRAME, id='surface', lines=[LinePrimitive(
             thickness=3.0, scale_invariant=True, color=_color((0.55, 0.6, 0.75)),
             points=[Point3(x=float(px), y=0.0, z=float(pz)) for px, pz in zip(xs, heights, strict=True)])])

@@ -72,6 +72,7 @@ class KernelModel(NamedTuple):
     attraction_n: np.ndarray    # ... and adhesive attraction (N)
     n_actuators: int
     landing_law: int            # LANDING_KEEP, LANDING_COULOMB or LANDING_STICK
+    lift_channel: int           # track: the channel whose stroke moves the track normal to its surface (0 or 1)
 
 
 # iv: discrete state. IV_ENTRY_COUNTER: the counter incremented when the current mode was entered (-1

@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from ..contact import ContactParams, contact_law
+from ..parameters import ParameterError
 from ..particle import ParticleParams
 from ..piezo import PiezoParams
 from ..surface import SurfaceParams, TrackParams
@@ -221,6 +222,11 @@ class FeederModel:
         object.__setattr__(self, '_waveform', waveform_table(self.stroke, self.surface.n_actuators))
         surface, integration, piezo = self.surface, self.integration, self.piezo
         track = surface.kind == 'track'
+        if track and surface.n_actuators != (2 if self.track.drive == 'two_way' else 1):
+            raise ParameterError('surface.centers', list(surface.centers),
+                                 f"track.drive '{self.track.drive}' moves the track with "
+                                 f"{2 if self.track.drive == 'two_way' else 1} actuator(s): give that many centres "
+                                 '(and widths, and stroke.phases)')
         alpha, beta = self.track.inclination, self.track.vibration_angle
         gravity = self.particle.gravity * (math.cos(alpha) if track else 1.0)     # its part normal to the surface
         scalars = dict(
@@ -246,7 +252,8 @@ class FeederModel:
             **{name: float(value) for name, value in scalars.items()},
             **{name: bool(value) for name, value in flags.items()}, **tables,
             centers=np.asarray(surface.centers, dtype=float), widths=np.asarray(surface.widths, dtype=float),
-            n_actuators=int(surface.n_actuators), landing_law=LANDING_LAWS.index(self.landing.law))
+            n_actuators=int(surface.n_actuators), landing_law=LANDING_LAWS.index(self.landing.law),
+            lift_channel=1 if track and self.track.drive == 'two_way' else 0)
         object.__setattr__(self, '_kernel_model', packed)
         object.__setattr__(self, '_recording_model', packed._replace(record=True))
 

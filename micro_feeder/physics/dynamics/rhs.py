@@ -92,7 +92,8 @@ def surface_here(x: float, st: np.ndarray, model: KernelModel,
                  aux: np.ndarray) -> tuple[float, float, float, float, float, float]:
     """:func:`surface_at` at ``x`` (m) from the strokes the last :func:`strokes_at` filled in ``st``."""
     if model.track:                          # flat, at the track's normal displacement s sin β
-        return model.lift * st[0, 0], 0.0, 0.0, model.lift * st[1, 0], model.lift * st[2, 0], 0.0
+        n = model.lift_channel
+        return model.lift * st[0, n], 0.0, 0.0, model.lift * st[1, n], model.lift * st[2, n], 0.0
     first, stop = felt(model, aux)
     return surface_at(x, st[0], st[1], st[2], model.centers, model.widths, model.cutoff_radius, first, stop)
 
@@ -154,7 +155,8 @@ def contact_load(x: float, xd: float, st: np.ndarray, base_acc: float, model: Ke
     """
     m = model.mass
     if model.track:
-        h, ht, htt, httt = model.lift * st[0, 0], model.lift * st[1, 0], model.lift * st[2, 0], model.lift * st[3, 0]
+        n = model.lift_channel
+        h, ht, htt, httt = model.lift * st[0, n], model.lift * st[1, n], model.lift * st[2, n], model.lift * st[3, n]
         hx = hxx = hxt = httx = hxxt = hxxx = 0.0
     else:
         first, stop = felt(model, aux)
