@@ -140,6 +140,15 @@ def _moving_again_after(watcher: Watcher, t_from: float) -> float | None:
     return None
 
 
+def _assert_nothing_late_joined_nothing_twice(sim_status: dict[str, str]) -> None:
+    """Every refusal was of a late window (none was a duplicate or invalid), and none joined: a window can
+    reach the simulator late when a process is starved or stopped for longer than stream.lead (windows in
+    flight when the actuator stopped are repaired by its reliable writer only when it runs again; a loaded
+    CI machine starved the simulator ~0.2 s once), and the simulator must refuse it rather than jump."""
+    assert int(sim_status['rejected_commands']) <= int(sim_status['commands_late']), sim_status
+    assert sim_status['rejected_commands'] == '0' or 'late by' in sim_status['last_rejection'], sim_status
+
+
 def _assert_no_throw(watcher: Watcher, before: float) -> None:
     """The part never faster than the same strokes moved it before the fault (5 % margin)."""
     peak = max(s for _, s in watcher.speeds[-20000:])
@@ -179,15 +188,9 @@ def test_a_stream_follows_sim_time_through_a_reset_and_a_stalled_actuator(ros_co
         stop_process(actuator)
         stop_process(sim)
     assert int(actuator_status['stream_rephases']) >= 1
-    if fault == 'reset':                                           # nothing late joined, nothing twice
-        assert sim_status['rejected_commands'] == '0', sim_status['last_rejection']
-    else:
-        # windows in flight when the actuator stopped may reach the simulator after it resumed (a reliable
-        # writer repairs what it sent only when it runs again): too late, each is refused, never joined
-        assert int(sim_status['rejected_commands']) <= int(sim_status['commands_late']), sim_status
-        assert sim_status['rejected_commands'] == '0' or 'late by' in sim_status['last_rejection'], sim_status
-        assert int(actuator_status['windows_sent']) < 400          # no replay of the past: windows in the
-                                                                   # usual ~50/s, not a burst of stale ones
+    _assert_nothing_late_joined_nothing_twice(sim_status)
+    if fault == 'sigstop':                                         # no replay of the past: windows in the
+        assert int(actuator_status['windows_sent']) < 400          # usual ~50/s, not a burst of stale ones
 
 
 def test_a_stream_survives_a_simulator_restart(ros_context: Context) -> None:
@@ -215,4 +218,4 @@ def test_a_stream_survives_a_simulator_restart(ros_context: Context) -> None:
         watcher.destroy_node()
         stop_process(actuator)
         stop_process(sim)
-    assert sim_status['rejected_commands'] == '0', sim_status['last_rejection']
+    _assert_nothing_late_joined_nothing_twice(sim_status)

@@ -142,7 +142,10 @@ def _conditioning(flat: dict[str, object], duration: float, offline: tuple) -> t
     return stable, allowance
 
 
-def _check_paths(scenario: dict[str, object]) -> None:
+def _check_paths(scenario: dict[str, object], drawn: bool = True) -> None:
+    """Every path moves the part as ``simulate`` does. A scenario whose transition counts change with a
+    change of the strokes as small as the knots' error has no path's answer: a drawn one is rejected
+    (hypothesis draws another), a listed one must not be such a scenario."""
     scenario = dict(scenario)
     streaming = {'max_points': scenario.pop('stream.max_points', MAX_POINTS),
                  'window': scenario.pop('stream.window', WINDOW)}
@@ -150,7 +153,10 @@ def _check_paths(scenario: dict[str, object]) -> None:
     duration = _duration(flat)
     offline = _offline(flat, duration)
     stable, allowance = _conditioning(flat, duration, offline)
-    assume(stable)                # counts on a knife's edge are no path's answer
+    if drawn:
+        assume(stable)            # counts on a knife's edge are no path's answer
+    else:
+        assert stable, ('a listed scenario on a knife\'s edge', scenario)
     stepped = _stepped(flat, duration, **streaming)
     assert stepped[1:] == offline[1:], (scenario, offline, stepped)
     assert _same_distance(stepped[0], offline[0], allowance), (scenario, offline, stepped, allowance)
@@ -194,7 +200,7 @@ FOUND_CASES = [   # found by the property below, fixed
 
 @pytest.mark.parametrize('scenario', ISSUE_CASES + FOUND_CASES)
 def test_listed_scenarios_move_the_part_the_same_on_every_path(scenario: dict[str, object]) -> None:
-    _check_paths(scenario)
+    _check_paths(scenario, drawn=False)
 
 
 @pytest.mark.paths
