@@ -58,8 +58,9 @@ def test_controller_crash_leaves_the_simulator_running_and_the_log_complete(ros_
     try:
         msgs = probe.msgs
         wait_until(lambda: len(msgs['particle/pose']) > 10, 120, executor=executor, what='the simulator')
-        # ~30 strokes away, 0.5 s of sim time between bursts: still running when the recorder has matched it
-        controller = start_process('feed_controller', '-p', 'feed.target_x:=0.2e-3', '-p', 'settle_time:=0.5')
+        # ~30 strokes away, 1 s of sim time (the most settle_time allows) between bursts: still running when the
+        # recorder has matched it (with 0.5 s a loaded CI run saw the controller done first, nothing recorded)
+        controller = start_process('feed_controller', '-p', 'feed.target_x:=0.2e-3', '-p', 'settle_time:=1.0')
         # kill the controller once the recorder reports a burst recorded (its first bursts can go out before
         # the new process and the recorder have matched), and once the part moved
         def recorded_bursts() -> int:
