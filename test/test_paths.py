@@ -223,6 +223,14 @@ FOUND_CASES = [   # found by the property below, fixed
      'stroke.duty': 0.9, 'stroke.amplitude': 0.0001, 'stroke.frequency': 1499.9960644840098,
      'stroke.phases': [1.0], 'surface.centers': [0.0], 'surface.widths': [0.0005],
      'particle.x0': 0.0005, 'piezo.enabled': False, 'stream.max_points': 16, 'stream.window': 0.000126667},
+    # offline missed a 27-µs slip: the stick margin Q_max - |T_req| has a kink (a maximum) where T_req changes
+    # sign, a second extremum in the step that hid the dip from the dip search (docs/events.md); 1.8 µm
+    {'stroke.waveform': 'asymmetric', 'stroke.count': 1, 'stroke.pause': 0.0, 'stroke.delay': 0.0,
+     'stroke.duty': 0.28210386925299147, 'stroke.amplitude': 8.128422838568671e-05,
+     'stroke.frequency': 2058.009929965201, 'stroke.phases': [1.6466573088440318e-93, 8.128422838568671e-05],
+     'surface.centers': [-0.0007489773893742689, 0.0007489773893742689],
+     'surface.widths': [0.001428445312394646, 0.0013675642198820773], 'particle.x0': 0.0008030048764981639,
+     'piezo.enabled': False, 'stream.max_points': 2000, 'stream.window': 0.0018543775707760173},
     # the take-off time moved 0.4 ns with the knots' s̈ error, set by the actuators' relative timing: the
     # amplitude alone (the conditioning before) moved the part 4.5e-10 m, the knots 1.3e-9 m
     {'stroke.waveform': 'raised_cosine', 'stroke.count': 4, 'stroke.pause': 0.0, 'stroke.delay': 0.0,

@@ -23,6 +23,7 @@ from .layout import (
     AUX_LOAD_INDEX,
     AUX_N,
     AUX_QMAX,
+    AUX_T_RATE,
     AUX_T_REQ,
     AUX_XS,
     FLYING,
@@ -239,7 +240,10 @@ def margin_slopes(mode: int, direction: int, y: np.ndarray, dy: np.ndarray, mode
     dL/dt = h_x (h_xt + h_xx v) / L; dT_req/dt = dN/dt h_x + N (h_xt + h_xx v) + m (dL/dt a_b + L da_b/dt);
     dQ_max/dt = the slope of the Q_max(N) table segment at N times dN/dt; the slide margin's is dir·a. NaN in
     flight, with the piezo model (the stack's s⃛ is not tracked) and with the threshold friction logic.
+    Stuck, dT_req/dt goes to ``aux[AUX_T_RATE]`` (NaN where there is no closed form): the dip search follows
+    the stick margin's two smooth branches Q_max ∓ T_req where T_req changes sign (``events.first_dip``).
     """
+    aux[AUX_T_RATE] = math.nan
     if mode == FLYING or model.piezo or model.threshold:
         return math.nan, math.nan
     m = model.mass
@@ -269,6 +273,7 @@ def margin_slopes(mode: int, direction: int, y: np.ndarray, dy: np.ndarray, mode
     q_rate = n_rate * (model.q_max_n[i + 1] - model.q_max_n[i]) / (model.load_n[i + 1] - model.load_n[i])
     t_req = n * hx + m * length * base
     t_req_rate = n_rate * hx + n * hx_rate + m * (length_rate * base + length * base_rate)
+    aux[AUX_T_RATE] = t_req_rate
     return q_rate - (t_req_rate if t_req > 0.0 else -t_req_rate if t_req < 0.0 else abs(t_req_rate)), adhesion_rate
 
 
