@@ -335,7 +335,29 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
                 dopri5_dense(theta, h, y, f0, y1, f1, work, work[9])   # a slide's end: the state on the
                 copy_into(y1, work[9])                                 # interpolant of the root
             elif adaptive:                      # take-off, landing: a full step to the root, as the
-                dopri5_step(mode, direction, t, y, f0, theta * h, model, src, cur, st, aux, work, y1)
+                # flight is sensitive to them; error-controlled, in pieces if need be: its last stage lies at
+                # the root, where the predicted state can overshoot the margin (past pull-off, the Q_max(N)
+                # table's steep first segment read a 1e-9 N overshoot as a negative friction limit, and one
+                # 250-ns step to a take-off came out 6.6e-7 m/s off)
+                t_root = t + theta * h
+                t_sub = t
+                y_sub, f_sub = work[9], work[10]
+                copy_into(y_sub, y)
+                copy_into(f_sub, f0)
+                while True:
+                    h_sub = t_root - t_sub
+                    while True:
+                        dopri5_step(mode, direction, t_sub, y_sub, f_sub, h_sub, model, src, cur, st, aux, work, y1)
+                        evaluate(mode, direction, t_sub + h_sub, y1, model, src, cur, st, aux, f1)
+                        err = dopri5_error(h_sub, f_sub, work, f1, model.tolerance, dt)
+                        if err <= 1.0 or not math.isfinite(err) or h_sub < 1e-14:
+                            break
+                        h_sub *= max(0.2, 0.9 * err ** -0.2)
+                    if h_sub == t_root - t_sub:
+                        break
+                    t_sub += h_sub
+                    copy_into(y_sub, y1)
+                    copy_into(f_sub, f1)
             else:                               # flight is sensitive to them; RK4: step to the root, once
                 slope = aux[AUX_ROOT_SLOPE]     # more if the true margin disagrees with Hermite's root
                 for attempt in range(2):
