@@ -71,6 +71,11 @@ SHORT_ROW = 8
 # within the narrowest width; beyond, evaluate() takes them all).
 FLIGHT_REACH = 1.0
 
+# The flight margin is the gap plus this many units of the heights' rounding (|z| + |h|, relative): a landing
+# needs the gap below what the heights resolve (~1e-19 m), not rounded to 0. Just after a take-off the gap
+# grows as t³ and stays below that for a nanosecond or two; a step ending there read it as 0 and landed.
+GAP_RESOLUTION = 8.0 * 2.220446049250313e-16
+
 
 @jit_inline
 def felt_range(model: KernelModel, x: float, reach: float) -> tuple[int, int]:
@@ -212,7 +217,7 @@ def evaluate(mode: int, direction: int, t: float, y: np.ndarray, model: KernelMo
         dy[1] = -base_acc + f_att * aux[AUX_HX] / (aux[AUX_L] * m)
         dy[2] = y[3]
         dy[3] = -model.gravity - f_att / (aux[AUX_L] * m)
-        return aux[AUX_GAP], math.inf
+        return aux[AUX_GAP] + GAP_RESOLUTION * (abs(y[2]) + abs(aux[AUX_H])), math.inf
     contact_load(y[0], y[1], st, base_acc, model, aux)
     n_detach = aux[AUX_N]
     if not model.include_weight:
