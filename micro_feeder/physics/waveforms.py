@@ -437,11 +437,13 @@ def _jumps_at_short_gaps(times: np.ndarray, pos: np.ndarray, vel: np.ndarray, ac
     and the later knot's side from b on, so a jump in ṡ or s̈ (the analytic waveform's, which the actuator
     brackets by knots ≤ 2 ns apart) is a hard breakpoint here as it is offline, not a ~1e9 m/s² quintic.
 
-    b is found per actuator from its two sides: where their positions' straight lines meet for a jump in ṡ,
-    where their velocities' lines meet for a jump in s̈ alone (exact but for the next order: an error in b
-    changes the velocity by Δs̈·δb, so b must be right, not merely inside the gap); the gap's middle when
-    nothing jumps. Returns the segment starts from the first knot (actuators, segments + 1) and the
-    coefficients (actuators, segments, 9)."""
+    b is where the two sides meet (:func:`_switch_times`), anywhere in the gap: a gap is short for every
+    actuator when one of them has a breakpoint there, so another's breakpoint may lie a hair from a knot
+    (the start of a stroke at a trajectory's or a window's first knot, or next to another actuator's knot),
+    and an error in b changes the velocity the part carries on with by s̈·δb (a take-off at the corner of an
+    ``asymmetric`` stroke: 1e-6 m/s for 0.1 ns). Returns the segment starts from the first knot (actuators,
+    segments + 1) and the coefficients (actuators, segments, 9); a side that the switch leaves no time is a
+    segment of length 0."""
     span = times - times[0]
     starts = np.tile(span, (pos.shape[1], 1))
     gaps = np.diff(times)
@@ -452,12 +454,7 @@ def _jumps_at_short_gaps(times: np.ndarray, pos: np.ndarray, vel: np.ndarray, ac
     d = gaps[short][:, None]                                      # (gaps, actuators) below
     p0, v0, a0 = pos[short], vel[short], acc[short]
     p1, v1, a1 = pos[short + 1], vel[short + 1], acc[short + 1]
-    dv, da = v0 - v1, a0 - a1
-    tiny = np.finfo(float).tiny
-    by_position = np.divide(p1 - p0 - v1 * d, dv, out=np.full_like(dv, np.nan), where=np.abs(dv) > tiny)
-    by_velocity = np.divide(v1 - v0 - a1 * d, da, out=np.full_like(da, np.nan), where=np.abs(da) > tiny)
-    tau = np.where(np.abs(dv) > np.abs(da) * d, by_position, by_velocity)
-    tau = np.where(np.isfinite(tau), np.clip(tau, 0.1 * d, 0.9 * d), d / 2.0)   # the actuator keeps ≥ d/4
+    tau = _switch_times(d, p0, v0, a0, p1, v1, a1)
     e = d - tau                                                    # from b to the later knot
     left = np.zeros((short.size, pos.shape[1], coef.shape[2]))
     left[..., 0], left[..., 1], left[..., 2] = p0, v0, a0 / 2.0
@@ -465,9 +462,39 @@ def _jumps_at_short_gaps(times: np.ndarray, pos: np.ndarray, vel: np.ndarray, ac
     right[..., 0], right[..., 1], right[..., 2] = p1 - v1 * e + a1 * e * e / 2.0, v1 - a1 * e, a1 / 2.0
     coef = coef.copy()
     coef[:, short] = left.transpose(1, 0, 2)
-    new_starts = np.insert(starts, short + 1, (span[short][:, None] + tau).T, axis=1)
+    switch = np.minimum(span[short][:, None] + tau, span[short + 1][:, None])     # never past the later knot
+    new_starts = np.insert(starts, short + 1, switch.T, axis=1)
     new_coef = np.insert(coef, short + 1, right.transpose(1, 0, 2), axis=1)
     return new_starts, new_coef
+
+
+def _switch_times(d: np.ndarray, p0: np.ndarray, v0: np.ndarray, a0: np.ndarray, p1: np.ndarray, v1: np.ndarray,
+                  a1: np.ndarray) -> np.ndarray:
+    """τ in [0, d]: where the earlier knot's side (p0, v0, a0 at τ = 0) meets the later one's (p1, v1, a1 at
+    τ = d), elementwise. The stroke's position is continuous at a breakpoint, so b is a root of the
+    difference of the two sides' Taylor parabolas, Q(τ) = Aτ² + Bτ + C:
+
+    * a jump in ṡ (Δv) is a simple root, the other lying 2Δv/Δs̈ away (~1/ω, far outside a 2-ns gap):
+      the root nearest the gap;
+    * a jump in s̈ alone is a double root (the sides touch: ṡ is continuous too), which rounding splits
+      or lifts off the axis by up to ~1 ps: the vertex, where the two sides' velocities meet;
+    * the two cases apart: roots more than 2d apart are a jump in ṡ, nearer ones (or none) a double root.
+
+    Exact but for the sides' next order (the jerk: b off by j·d²/Δs̈, ~1e-19 s for a piezo's strokes).
+    Where nothing jumps (a smooth actuator in a gap that another one's breakpoint made short) both sides
+    are the same stroke and any τ in the gap does."""
+    half_da = (a0 - a1) / 2.0
+    b = v0 - v1 + a1 * d
+    c = p0 - p1 + v1 * d - a1 * d * d / 2.0
+    disc = b * b - 4.0 * half_da * c
+    with np.errstate(divide='ignore', invalid='ignore'):
+        vertex = np.where(half_da != 0.0, -b / (2.0 * half_da), d / 2.0)
+        q = -(b + np.copysign(np.sqrt(np.maximum(disc, 0.0)), b)) / 2.0
+        roots = np.stack([q / half_da, c / q])                  # stable: no cancellation in either
+    outside = np.maximum(-roots, roots - d)                       # distance from the gap (≤ 0: inside)
+    nearest = np.where(outside[0] <= outside[1], roots[0], roots[1])
+    tau = np.where(disc > 4.0 * (half_da * d) ** 2, nearest, vertex)
+    return np.where(np.isfinite(tau), np.clip(tau, 0.0, d), d / 2.0)
 
 
 class StrokeSchedule:

@@ -112,11 +112,11 @@ def crossed(value: float, strict: bool) -> bool:
 @jit_inline
 def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0: np.ndarray, y1: np.ndarray,
               f1: np.ndarray, g0: float, g1: float, e0: float, e1: float, fresh: bool, start_known: bool,
-              start_slope0: float, start_slope1: float, end_slope0: float, end_slope1: float, model: KernelModel,
-              src: tuple, cur: np.ndarray, st: np.ndarray, aux: np.ndarray, work: np.ndarray,
-              dense: bool) -> tuple[float, float, float]:
+              start_slope0: float, start_slope1: float, end_slope0: float, end_slope1: float, t_req0: float,
+              t_rate0: float, t_req1: float, t_rate1: float, model: KernelModel, src: tuple, cur: np.ndarray,
+              st: np.ndarray, aux: np.ndarray, work: np.ndarray, dense: bool) -> tuple[float, float, float, float]:
     """Step fraction of a point where a margin, positive at both ends of the step, dips past its event
-    inside it (-1 if there is none), and both margins' slopes (per second) at the step's end.
+    inside it (-1 if there is none), both margins' slopes (per second) at the step's end, and dT_req/dt there.
 
     A margin with an interior minimum decreases where the step starts and increases where it ends. The
     slopes come in closed form (:func:`margin_slopes`: ``start_slope0/1`` when ``start_known``,
@@ -126,19 +126,39 @@ def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0:
     event tolerance, stopping at the first point past the event. Guarantee, under the assumption that a
     margin has at most one local extremum within one step (docs/events.md): a dip longer than the event
     tolerance is found, whatever the step size.
+
+    The stick margin Q_max − |T_req| has one more, a kink (a local maximum), where T_req changes sign: a
+    step over which it does (``t_req0``, ``t_req1``: T_req at the step's ends, ``t_rate0/1`` its rates, NaN
+    where :func:`margin_slopes` has no closed form) is searched on the margin's two smooth branches
+    Q_max ∓ T_req, each with its own values and slopes at both ends (the margin is the lower of them).
     """
     tol = model.event_tolerance / h
     if tol >= 0.25:
-        return -1.0, math.nan, math.nan
+        return -1.0, math.nan, math.nan, t_rate1
     delta = min(1e-3, tol)
     b0 = b1 = math.nan
+    t_near_start = t_near_end = math.nan
     if math.isnan(end_slope0):
         b0, b1 = margins_at(1.0 - delta, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux, work,
                             dense)
+        t_near_end = aux[AUX_T_REQ]
         end_slope0, end_slope1 = (e0 - b0) / (delta * h), (e1 - b1) / (delta * h)
     if not start_known:
         a0, a1 = margins_at(delta, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux, work, dense)
+        t_near_start = aux[AUX_T_REQ]
         start_slope0, start_slope1 = (a0 - g0) / (delta * h), (a1 - g1) / (delta * h)
+    kink = mode == STUCK and t_req0 * t_req1 < 0.0
+    if mode == STUCK and math.isnan(t_rate1):
+        if math.isnan(t_near_end):
+            margins_at(1.0 - delta, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux, work, dense)
+            t_near_end = aux[AUX_T_REQ]
+        t_rate1 = (t_req1 - t_near_end) / (delta * h)
+    if kink and math.isnan(t_rate0):
+        if math.isnan(t_near_start):
+            margins_at(delta, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux, work, dense)
+            t_near_start = aux[AUX_T_REQ]
+        t_rate0 = (t_near_start - t_req0) / (delta * h)
+    s0 = 1.0 if t_req0 > 0.0 else -1.0       # the sign of T_req where the step starts (kink: -s0 at its end)
     best = 2.0
     for which in range(2):
         start, end = (g0, e0) if which == 0 else (g1, e1)
@@ -148,18 +168,28 @@ def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0:
             continue
         strict = mode == STUCK and which == 0
         if crossed(near_end, strict):           # (NaN, not evaluated, is not crossed)
-            theta = 1.0 - delta
-        elif start_slope < 0.0 and end_slope > 0.0:
+            best = min(best, 1.0 - delta)
+            continue
+        branches = 2 if strict and kink else 1
+        for k in range(branches):
+            branch = 0.0                        # the margin itself, else the branch Q_max - branch T_req
+            v_start, v_end, d_start, d_end = start, end, start_slope, end_slope
+            if branches == 2:                   # the branch the margin starts on, then the one it ends on
+                branch = s0 if k == 0 else -s0
+                v_start = start + abs(t_req0) - branch * t_req0
+                v_end = end + abs(t_req1) - branch * t_req1
+                d_start = start_slope + (s0 - branch) * t_rate0
+                d_end = end_slope + (-s0 - branch) * t_rate1
+            if not (d_start < 0.0 and d_end > 0.0):
+                continue
             if which == 1 and adhesion_floor(mode, t, h, y0, f0, y1, f1, work, dense, model, src, cur) > 0.0:
                 continue                        # the adhesion margin cannot reach 0 in this step
-            seed = dip_seed(start, end, start_slope * h, end_slope * h, tol)
-            theta = brent_dip(which, strict, seed, start, end, mode, direction, t, h, y0, f0, y1, f1, model, src,
-                              cur, st, aux, work, dense, tol)
-        else:
-            continue
-        if 0.0 < theta < best:
-            best = theta
-    return (best if best <= 1.0 else -1.0), end_slope0, end_slope1
+            seed = dip_seed(v_start, v_end, d_start * h, d_end * h, tol)
+            theta = brent_dip(which, strict, branch, seed, v_start, v_end, mode, direction, t, h, y0, f0, y1, f1,
+                              model, src, cur, st, aux, work, dense, tol)
+            if 0.0 < theta < best:
+                best = theta
+    return (best if best <= 1.0 else -1.0), end_slope0, end_slope1, t_rate1
 
 
 @jit_inline
@@ -211,12 +241,13 @@ def dip_seed(g0: float, g1: float, d0: float, d1: float, tol: float) -> float:
 
 
 @jit_inline
-def brent_dip(which: int, strict: bool, seed: float, g_start: float, g_end: float, mode: int, direction: int,
-              t: float, h: float, y0: np.ndarray,
+def brent_dip(which: int, strict: bool, branch: float, seed: float, g_start: float, g_end: float, mode: int,
+              direction: int, t: float, h: float, y0: np.ndarray,
               f0: np.ndarray, y1: np.ndarray, f1: np.ndarray, model: KernelModel, src: tuple, cur: np.ndarray,
               st: np.ndarray, aux: np.ndarray, work: np.ndarray, dense: bool, tol: float) -> float:
     """Brent's minimisation (parabolic steps, golden-section fallback) of margin ``which`` over the step
-    (fractions 0..1) to ``tol``, returning the first fraction found past the event, or -1 when the
+    (fractions 0..1; ``branch`` ±1: the stick margin's branch Q_max − branch·T_req instead, 0: the margin
+    itself) to ``tol``, returning the first fraction found past the event, or -1 when the
     minimum stays short of it. It starts at ``seed``, with the step's ends (margins ``g_start``,
     ``g_end``) as the other points of its first parabola. (One evaluation site, the first point
     included: it is inlined.)"""
@@ -250,6 +281,8 @@ def brent_dip(which: int, strict: bool, seed: float, g_start: float, g_end: floa
                 d = golden * e
             u = x + d if abs(d) >= tol else x + (tol if d > 0.0 else -tol)
         fu = margins_at(u, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux, work, dense)[which]
+        if branch != 0.0:
+            fu = aux[AUX_QMAX] - branch * aux[AUX_T_REQ]
         if crossed(fu, strict):
             return u
         if it == 0:                         # the ends are the other two points of the first parabola

@@ -22,6 +22,7 @@ from .layout import (
     AUX_N,
     AUX_QMAX,
     AUX_ROOT_SLOPE,
+    AUX_T_RATE,
     AUX_T_REQ,
     C_FRICTION,
     C_GAP,
@@ -201,6 +202,7 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
     h_wave = math.inf
     dip_retries = 0
     start_known, start_slope0, start_slope1 = iv[IV_START_KNOWN] != 0, fs[FS_START_SLOPE0], fs[FS_START_SLOPE1]
+    t_req0 = t_rate0 = t_req1 = t_rate1 = math.nan      # T_req and dT_req/dt where the step starts and ends
     while t < t_target:
         if n_ev + 2 > ev_i.shape[0]:
             status = EVENTS_FULL
@@ -226,9 +228,11 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
                     n_ev += 1
                     mode = iv[IV_MODE]
             g0, g1 = evaluate(mode, iv[IV_DIR], t, y, model, src, cur, st, aux, f0)
+            t_req0 = aux[AUX_T_REQ]
             need_eval = False
             if dip_search:                      # the margins' slopes where this step starts
                 start_slope0, start_slope1 = margin_slopes(mode, iv[IV_DIR], y, f0, model, st, aux)
+                t_rate0 = aux[AUX_T_RATE]
                 start_known = not math.isnan(start_slope0)
             if g1 <= 0.0:                       # a condition that already holds switches at once
                 which = 1
@@ -266,9 +270,11 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
                     break
                 h *= max(0.2, 0.9 * err ** -0.2)
                 h_proposed = 0.0
+            t_req1 = aux[AUX_T_REQ]
             end_slope0 = end_slope1 = math.nan
             if dip_search:                      # in closed form where it has one (else NaN)
                 end_slope0, end_slope1 = margin_slopes(mode, direction, y1, f1, model, st, aux)
+                t_rate1 = aux[AUX_T_RATE]
             if not finite(y1) or math.isnan(e0) or math.isnan(e1):
                 status = NON_FINITE
                 break
@@ -277,9 +283,10 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
             hit0 = (e0 < 0.0 and g0 >= 0.0) if mode == STUCK else (e0 <= 0.0 and (g0 > 0.0 or fresh))
             hit1 = e1 <= 0.0 and g1 > 0.0
             if not (hit0 or hit1) and dip_search and dip_retries < 4:
-                theta, end_slope0, end_slope1 = first_dip(
+                theta, end_slope0, end_slope1, t_rate1 = first_dip(
                     mode, direction, t, h, y, f0, y1, f1, g0, g1, e0, e1, fresh, start_known, start_slope0,
-                    start_slope1, end_slope0, end_slope1, model, src, cur, st, aux, work, error_control)
+                    start_slope1, end_slope0, end_slope1, t_req0, t_rate0, t_req1, t_rate1, model, src, cur, st,
+                    aux, work, error_control)
                 if theta > 0.0:                 # a margin dips past its event inside the step: end the
                     h_cap = theta * h           # step there (the retried step then locates the root)
                     dip_retries += 1
@@ -296,6 +303,7 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
                 copy_into(y, y1)
                 copy_into(f0, f1)
                 g0, g1 = e0, e1
+                t_req0, t_rate0 = t_req1, t_rate1
                 iv[IV_FRESH] = 0
                 dip_retries = 0
                 # each margin's slope where the next step starts (at this step's end)
@@ -327,7 +335,38 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
                 dopri5_dense(theta, h, y, f0, y1, f1, work, work[9])   # a slide's end: the state on the
                 copy_into(y1, work[9])                                 # interpolant of the root
             elif adaptive:                      # take-off, landing: a full step to the root, as the
-                dopri5_step(mode, direction, t, y, f0, theta * h, model, src, cur, st, aux, work, y1)
+                # flight is sensitive to them; error-controlled, in pieces if need be: its last stage lies at
+                # the root, where the predicted state can overshoot the margin (past pull-off, the Q_max(N)
+                # table's steep first segment read a 1e-9 N overshoot as a negative friction limit, and one
+                # 250-ns step to a take-off came out 6.6e-7 m/s off)
+                t_root = t + theta * h
+                t_sub = t
+                y_sub, f_sub = work[9], work[10]
+                copy_into(y_sub, y)
+                copy_into(f_sub, f0)
+                while True:
+                    h_sub = t_root - t_sub
+                    while True:
+                        dopri5_step(mode, direction, t_sub, y_sub, f_sub, h_sub, model, src, cur, st, aux, work, y1)
+                        evaluate(mode, direction, t_sub + h_sub, y1, model, src, cur, st, aux, f1)
+                        err = dopri5_error(h_sub, f_sub, work, f1, model.tolerance, dt)
+                        if err <= 1.0 or not math.isfinite(err) or h_sub < 1e-14:
+                            break
+                        h_sub *= max(0.2, 0.9 * err ** -0.2)
+                    if h_sub == t_root - t_sub:
+                        break
+                    t_sub += h_sub
+                    copy_into(y_sub, y1)
+                    copy_into(f_sub, f1)
+                # a landing in a take-off's first step: the gap, 0 at the take-off, is there smaller than the
+                # interpolant's error, which can cross 0 at once (75 ps into a step whose end had landed 0.8 µs
+                # after the true landing); the gap the step to the root reaches decides: if it is still open,
+                # the step is retaken shorter
+                if mode == FLYING and fresh and dip_retries < 8 and \
+                        evaluate(mode, direction, t_root, y1, model, src, cur, st, aux, f1)[0] > 0.0:
+                    h_cap = 0.5 * h
+                    dip_retries += 1
+                    continue
             else:                               # flight is sensitive to them; RK4: step to the root, once
                 slope = aux[AUX_ROOT_SLOPE]     # more if the true margin disagrees with Hermite's root
                 for attempt in range(2):

@@ -95,10 +95,12 @@ N_SCRATCH = 11
 # aux: quantities of the last evaluation; AUX_FELT_LO/HI: the range of actuators whose strokes the last
 # evaluation filled in ``st`` (the other columns are stale: read ``st`` through ``rhs.felt``); AUX_JET: where
 # a contact evaluation leaves the surface's h_xx, h_tt, h_xt, h_ttt, h_ttx, h_xxt, h_xxx at the part (for
-# ``rhs.margin_slopes``, in that order)
+# ``rhs.margin_slopes``, in that order); AUX_T_RATE: dT_req/dt where ``rhs.margin_slopes`` last found the stuck
+# margin's slope (NaN where it has no closed form)
 (AUX_N, AUX_T_REQ, AUX_QMAX, AUX_L, AUX_H, AUX_HX, AUX_HT, AUX_GAP, AUX_XS, AUX_LOAD_INDEX,
  AUX_ROOT_SLOPE, AUX_FELT_LO, AUX_FELT_HI, AUX_JET) = range(14)
-N_AUX = AUX_JET + 7
+AUX_T_RATE = AUX_JET + 7
+N_AUX = AUX_JET + 8
 
 # Columns of a recorded row (then one stroke column per actuator).
 (C_T, C_MODE, C_X, C_Z, C_XD, C_ZD, C_THETA, C_N, C_FRICTION, C_QMAX, C_SEPARATION, C_GAP, C_H,

@@ -23,6 +23,7 @@ from .layout import (
     AUX_LOAD_INDEX,
     AUX_N,
     AUX_QMAX,
+    AUX_T_RATE,
     AUX_T_REQ,
     AUX_XS,
     FLYING,
@@ -69,6 +70,11 @@ SHORT_ROW = 8
 # than the cutoff radius (then every actuator surface_at includes at x_s is evaluated while |x_s - x| is
 # within the narrowest width; beyond, evaluate() takes them all).
 FLIGHT_REACH = 1.0
+
+# The flight margin is the gap plus this many units of the heights' rounding (|z| + |h|, relative): a landing
+# needs the gap below what the heights resolve (~1e-19 m), not rounded to 0. Just after a take-off the gap
+# grows as t³ and stays below that for a nanosecond or two; a step ending there read it as 0 and landed.
+GAP_RESOLUTION = 8.0 * 2.220446049250313e-16
 
 
 @jit_inline
@@ -221,7 +227,7 @@ def evaluate(mode: int, direction: int, t: float, y: np.ndarray, model: KernelMo
         dy[1] = -base_acc + f_att * aux[AUX_HX] / (aux[AUX_L] * m)
         dy[2] = y[3]
         dy[3] = -model.gravity - f_att / (aux[AUX_L] * m)
-        return aux[AUX_GAP], math.inf
+        return aux[AUX_GAP] + GAP_RESOLUTION * (abs(y[2]) + abs(aux[AUX_H])), math.inf
     contact_load(y[0], y[1], st, base_acc, model, aux)
     n_detach = aux[AUX_N]
     if not model.include_weight:
@@ -249,7 +255,10 @@ def margin_slopes(mode: int, direction: int, y: np.ndarray, dy: np.ndarray, mode
     dL/dt = h_x (h_xt + h_xx v) / L; dT_req/dt = dN/dt h_x + N (h_xt + h_xx v) + m (dL/dt a_b + L da_b/dt);
     dQ_max/dt = the slope of the Q_max(N) table segment at N times dN/dt; the slide margin's is dir·a. NaN in
     flight, with the piezo model (the stack's s⃛ is not tracked) and with the threshold friction logic.
+    Stuck, dT_req/dt goes to ``aux[AUX_T_RATE]`` (NaN where there is no closed form): the dip search follows
+    the stick margin's two smooth branches Q_max ∓ T_req where T_req changes sign (``events.first_dip``).
     """
+    aux[AUX_T_RATE] = math.nan
     if mode == FLYING or model.piezo or model.threshold:
         return math.nan, math.nan
     m = model.mass
@@ -282,6 +291,7 @@ def margin_slopes(mode: int, direction: int, y: np.ndarray, dy: np.ndarray, mode
     q_rate = n_rate * (model.q_max_n[i + 1] - model.q_max_n[i]) / (model.load_n[i + 1] - model.load_n[i])
     t_req = n * hx + m * length * base
     t_req_rate = n_rate * hx + n * hx_rate + m * (length_rate * base + length * base_rate)
+    aux[AUX_T_RATE] = t_req_rate
     return q_rate - (t_req_rate if t_req > 0.0 else -t_req_rate if t_req < 0.0 else abs(t_req_rate)), adhesion_rate
 
 
