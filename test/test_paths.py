@@ -50,6 +50,18 @@ MAX_POINTS = 2000             # the actuator's default stream.max_points
 ABS_TOL, REL_TOL = 1e-9, 1e-6
 
 
+def _harmonics(draw: st.DrawFn) -> dict[str, object]:
+    """The terms of a ``harmonics`` stroke: 1-3 distinct harmonic numbers, amplitudes and phases."""
+    numbers = draw(st.lists(st.integers(1, 5), min_size=1, max_size=3, unique=True))
+    phases = [draw(st.floats(-math.pi, math.pi)) for _ in numbers]
+    weights = [draw(st.floats(0.05, 1.0)) for _ in numbers]
+    # |s| ≤ A Σ a_h (1 + |sin φ_h|): scaled to ≤ A, so the strokes stay within the piezo travel the simulator
+    # accepts (the drawn amplitudes are below it)
+    scale = sum(w * (1.0 + abs(math.sin(p))) for w, p in zip(weights, phases, strict=True))
+    return {'stroke.harmonics': numbers, 'stroke.harmonic_amplitudes': [w / scale for w in weights],
+            'stroke.harmonic_phases': phases}
+
+
 @st.composite
 def scenarios(draw: st.DrawFn) -> dict[str, object]:
     """Flat settings of one scenario; everything else at its default."""
@@ -77,6 +89,8 @@ def scenarios(draw: st.DrawFn) -> dict[str, object]:
         # first sample 0: a shape starting elsewhere jumps in *position* at the burst's start, which two knots
         # cannot place exactly (docs/dynamics.md §2, a known limit: up to 0.4 ns off, a few nm after a flight)
         flat['stroke.samples'] = [0.0] + [draw(st.floats(-0.3, 1.0)) for _ in range(draw(st.integers(3, 7)))]
+    if waveform == 'harmonics':
+        flat.update(_harmonics(draw))
     return flat
 
 
@@ -334,6 +348,7 @@ def track_scenarios(draw: st.DrawFn) -> dict[str, object]:
         'stroke.amplitude': draw(st.floats(5e-6, 150e-6)),
         'stroke.duty': draw(st.floats(0.1, 0.9)), 'stroke.delay': draw(st.sampled_from([0.0, 1e-3])),
         'particle.x0': 0.0,
+        **(_harmonics(draw) if waveform == 'harmonics' else {}),
     }
 
 

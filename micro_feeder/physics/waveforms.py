@@ -3,14 +3,15 @@
 Every stroke source compiles to a :class:`StrokeTable`: per actuator (channel), a pattern of
 segments repeated ``count`` times with a ``period``, starting at ``start``. Each segment is
 
-    s(τ) = Σ_{i=0..5} c_i τ^i + C cos(ωτ) + S sin(ωτ),   τ = t − (segment start)  (s in m, t in s),
+    s(τ) = Σ_{i=0..5} c_i τ^i + Σ_{h<N_TRIG} [C_h cos(ω_h τ) + S_h sin(ω_h τ)],   τ = t − (segment start)
+    (s in m, t in s),
 
 which represents every shape exactly: the raised cosine, sine, half sine and asymmetric shapes (one
-trigonometric term), the jerk-limited trapezoid and the ``samples`` spline (cubics), and the quintic /
-cubic Hermite pieces of a commanded trajectory. Segment boundaries are hard breakpoints: the integrator
-ends its steps there and evaluates each side from its own segment (docs/dynamics.md §2). Outside the
-repeated pattern the stroke holds a constant (``before`` / ``after``; 0 for a waveform burst, the last
-knot's position for a trajectory).
+trigonometric term), a sum of up to :data:`N_TRIG` harmonics (one term each), the jerk-limited
+trapezoid and the ``samples`` spline (cubics), and the quintic / cubic Hermite pieces of a commanded
+trajectory. Segment boundaries are hard breakpoints: the integrator ends its steps there and evaluates
+each side from its own segment (docs/dynamics.md §2). Outside the repeated pattern the stroke holds a
+constant (``before`` / ``after``; 0 for a waveform burst, the last knot's position for a trajectory).
 
 Waveform conventions (docs/dynamics.md §2): a stroke lasts 1/f; ``count`` strokes follow each other
 separated by ``pause`` seconds; the burst starts after ``delay``; actuator k is delayed by
@@ -31,12 +32,13 @@ from scipy.interpolate import CubicSpline
 from ._jit import jit, jit_inline
 from .parameters import ParameterError, ParameterGroup, param
 
-WAVEFORMS = ('raised_cosine', 'sine', 'half_sine', 'trapezoid', 'asymmetric', 'samples')
+WAVEFORMS = ('raised_cosine', 'sine', 'half_sine', 'trapezoid', 'asymmetric', 'samples', 'harmonics')
 
-# Layout of one segment's coefficient row.
-N_POLY = 6                      # c_0 .. c_5
-COEF_COS, COEF_SIN, COEF_OMEGA = 6, 7, 8
-N_COEF = 9
+# Layout of one segment's coefficient row: c_0 .. c_5, then (C_h, S_h, ω_h) for each trigonometric term h.
+N_POLY = 6
+N_TRIG = 3                      # trigonometric terms per segment: the most harmonics a stroke can sum
+COEF_COS, COEF_SIN, COEF_OMEGA = 6, 7, 8      # of term 0; term h at + 3h
+N_COEF = N_POLY + 3 * N_TRIG
 
 
 @dataclass(frozen=True)
@@ -58,6 +60,25 @@ class StrokeParams(ParameterGroup):
     samples: tuple = param((0.0, 0.5, 1.0, 0.5), 'samples waveform: stroke as a fraction of amplitude '
                            'at equally spaced phases over one period (periodic cubic spline)', '',
                            min_length=4)
+    harmonics: tuple = param((1, 2), 'harmonics waveform: the harmonic numbers n (whole, distinct, at most '
+                             f'{N_TRIG}): term h runs at n_h·f', '', min_length=1, ge=1, le=1000)
+    harmonic_amplitudes: tuple = param((1.0, 0.5), 'harmonics waveform: each term\'s amplitude as a fraction '
+                                       'of stroke.amplitude (one per stroke.harmonics entry)', '', min_length=1,
+                                       ge=0.0, le=1e3)
+    harmonic_phases: tuple = param((0.0, 0.0), 'harmonics waveform: each term\'s phase φ_h (one per '
+                                   'stroke.harmonics entry): s = A Σ a_h [sin(2π n_h f τ + φ_h) − sin φ_h]',
+                                   'rad', min_length=1, ge=-100.0, le=100.0)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        n = len(self.harmonics)
+        if any(float(h) != int(h) for h in self.harmonics) or len(set(self.harmonics)) != n or n > N_TRIG:
+            raise ParameterError('stroke.harmonics', list(self.harmonics),
+                                 f'distinct whole numbers, at most {N_TRIG} of them')
+        for name in ('harmonic_amplitudes', 'harmonic_phases'):
+            if len(getattr(self, name)) != n:
+                raise ParameterError(f'stroke.{name}', list(getattr(self, name)),
+                                     f'one entry per stroke.harmonics entry ({n})')
 
     @property
     def period_s(self) -> float:
@@ -188,16 +209,18 @@ def channel_value(src: tuple, k: int, j: int, i: int, t: float) -> tuple[float, 
     sd = c[1] + tau * (2.0 * c[2] + tau * (3.0 * c[3] + tau * (4.0 * c[4] + tau * 5.0 * c[5])))
     sdd = 2.0 * c[2] + tau * (6.0 * c[3] + tau * (12.0 * c[4] + tau * 20.0 * c[5]))
     sddd = 6.0 * c[3] + tau * (24.0 * c[4] + tau * 60.0 * c[5])
-    w = c[COEF_OMEGA]
-    if c[COEF_COS] != 0.0 or c[COEF_SIN] != 0.0:
-        cw = math.cos(w * tau)
-        sw = math.sin(w * tau)
-        trig = c[COEF_COS] * cw + c[COEF_SIN] * sw
-        trig_rate = c[COEF_SIN] * cw - c[COEF_COS] * sw
-        s += trig
-        sd += w * trig_rate
-        sdd -= w * w * trig
-        sddd -= w * w * w * trig_rate
+    for h in range(N_TRIG):
+        base = N_POLY + 3 * h
+        if c[base] != 0.0 or c[base + 1] != 0.0:
+            w = c[base + 2]
+            cw = math.cos(w * tau)
+            sw = math.sin(w * tau)
+            trig = c[base] * cw + c[base + 1] * sw
+            trig_rate = c[base + 1] * cw - c[base] * sw
+            s += trig
+            sd += w * trig_rate
+            sdd -= w * w * trig
+            sddd -= w * w * w * trig_rate
     return s, sd, sdd, sddd
 
 
@@ -205,7 +228,7 @@ def channel_value(src: tuple, k: int, j: int, i: int, t: float) -> tuple[float, 
 def channel_bounds(src: tuple, k: int, j: int, i: int, t0: float, t1: float) -> tuple[float, float, float]:
     """Upper bounds of |s| (m), |ṡ| (m/s) and |s̈| (m/s²) of channel ``k`` on segment (j, i) (as
     :func:`channel_value` evaluates it) for every t in [t0, t1]: each polynomial coefficient's term at the
-    largest |τ| of the range, plus the trigonometric term's amplitude times ω⁰, ω¹, ω²."""
+    largest |τ| of the range, plus each trigonometric term's amplitude times ω⁰, ω¹, ω²."""
     if j < 0:                                          # held before or after the schedule
         return abs(channel_value(src, k, j, i, t0)[0]), 0.0, 0.0
     tau = max(abs(segment_time(src, k, j, i, t0)), abs(segment_time(src, k, j, i, t1)))
@@ -219,9 +242,13 @@ def channel_bounds(src: tuple, k: int, j: int, i: int, t0: float, t1: float) -> 
         if n + 2 < 6:
             sdd_max += (n + 2) * (n + 1) * abs(c[n + 2]) * power
         power *= tau
-    amplitude = math.hypot(c[COEF_COS], c[COEF_SIN])
-    w = abs(c[COEF_OMEGA])
-    return s_max + amplitude, sd_max + amplitude * w, sdd_max + amplitude * w * w
+    for h in range(N_TRIG):
+        amplitude = math.hypot(c[N_POLY + 3 * h], c[N_POLY + 3 * h + 1])
+        w = abs(c[N_POLY + 3 * h + 2])
+        s_max += amplitude
+        sd_max += amplitude * w
+        sdd_max += amplitude * w * w
+    return s_max, sd_max, sdd_max
 
 
 @jit
@@ -236,9 +263,9 @@ def sample_into(src: tuple, times: np.ndarray, out: np.ndarray) -> None:
 
 @jit
 def sixth_derivative_bound(src: tuple, times: np.ndarray, out: np.ndarray) -> None:
-    """``out`` (times,): R(t) = max over channels of √(C² + S²)·ω⁶ of the segment active at each of ``times``
-    (m/s⁶; 0 where no channel runs a trigonometric term): the polynomial part of a segment has no sixth
-    derivative, so R bounds |s⁽⁶⁾|."""
+    """``out`` (times,): R(t) = max over channels of Σ_h √(C_h² + S_h²)·ω_h⁶ of the segment active at each of
+    ``times`` (m/s⁶; 0 where no channel runs a trigonometric term): the polynomial part of a segment has no
+    sixth derivative, so R bounds |s⁽⁶⁾|."""
     seg_coef = src[6]
     for n in range(times.size):
         worst = 0.0
@@ -246,17 +273,23 @@ def sixth_derivative_bound(src: tuple, times: np.ndarray, out: np.ndarray) -> No
             j, i = locate_segment(src, k, times[n])
             if j >= 0:
                 c = seg_coef[k, i]
-                worst = max(worst, math.hypot(c[COEF_COS], c[COEF_SIN]) * c[COEF_OMEGA] ** 6)
+                bound = 0.0
+                for h in range(N_TRIG):
+                    bound += math.hypot(c[N_POLY + 3 * h], c[N_POLY + 3 * h + 1]) * c[N_POLY + 3 * h + 2] ** 6
+                worst = max(worst, bound)
         out[n] = worst
 
 
 # ----------------------------------------------------------------------------------------------------
 # Building tables
 
-def _segment(poly: Sequence[float] = (), cos: float = 0.0, sin: float = 0.0, omega: float = 0.0) -> np.ndarray:
+def _segment(poly: Sequence[float] = (), cos: float = 0.0, sin: float = 0.0, omega: float = 0.0,
+             more: Sequence[tuple[float, float, float]] = ()) -> np.ndarray:
+    """One coefficient row: the polynomial, the trigonometric term (cos, sin, omega), then ``more`` terms."""
     row = np.zeros(N_COEF)
     row[:len(poly)] = poly
-    row[COEF_COS], row[COEF_SIN], row[COEF_OMEGA] = cos, sin, omega
+    for h, term in enumerate([(cos, sin, omega), *more]):
+        row[N_POLY + 3 * h:N_POLY + 3 * h + 3] = term
     return row
 
 
@@ -296,6 +329,12 @@ def _unit_pattern(params: StrokeParams) -> list[tuple[float, np.ndarray]]:
     if shape == 'asymmetric':
         return [(0.0, _segment([0.5], cos=-0.5, omega=math.pi / duty)),
                 (duty, _segment([0.5], cos=0.5, omega=math.pi / (1.0 - duty)))]
+    if shape == 'harmonics':      # Σ a_h [sin(2π n_h u + φ_h) − sin φ_h]: 0 at the start and end of a stroke
+        terms = [(a * math.sin(phi), a * math.cos(phi), two_pi * n) for n, a, phi
+                 in zip(params.harmonics, params.harmonic_amplitudes, params.harmonic_phases, strict=True)]
+        offset = -sum(a * math.sin(phi) for a, phi in zip(params.harmonic_amplitudes, params.harmonic_phases,
+                                                          strict=True))
+        return [(0.0, _segment([offset], *terms[0], more=terms[1:]))]
     if shape == 'trapezoid':
         ramp = (1.0 - duty) / 2.0
         out = []
@@ -325,8 +364,9 @@ def waveform_table(params: StrokeParams, n_actuators: int) -> StrokeTable:
     for _, coef in pattern:                       # phase -> time: c_i f^i, ω f; scale by A
         row = coef.copy()
         row[:N_POLY] *= amplitude * f ** np.arange(N_POLY)
-        row[COEF_COS:COEF_OMEGA] *= amplitude
-        row[COEF_OMEGA] *= f
+        for h in range(N_TRIG):
+            row[N_POLY + 3 * h:N_POLY + 3 * h + 2] *= amplitude
+            row[N_POLY + 3 * h + 2] *= f
         rows.append(row)
     if params.pause > 0:
         starts.append(1.0 / f)

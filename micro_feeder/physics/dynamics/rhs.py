@@ -10,7 +10,7 @@ import numpy as np
 from .._jit import jit, jit_inline
 from ..piezo import piezo_acceleration
 from ..surface import surface_at, surface_jet
-from ..waveforms import COEF_OMEGA, channel_value, locate_segment, segment_end
+from ..waveforms import N_POLY, N_TRIG, channel_value, locate_segment, segment_end
 from .layout import (
     AUX_FELT_HI,
     AUX_FELT_LO,
@@ -316,7 +316,8 @@ def wave_step(src: tuple, cur: np.ndarray) -> float:
     fastest = 0.0
     for k in range(cur.shape[0]):
         if cur[k, 0] >= 0:
-            fastest = max(fastest, abs(seg_coef[k, cur[k, 1], COEF_OMEGA]))
+            for h in range(N_TRIG):
+                fastest = max(fastest, abs(seg_coef[k, cur[k, 1], N_POLY + 3 * h + 2]))
     return math.pi / (4.0 * fastest) if fastest > 0.0 else math.inf
 
 
