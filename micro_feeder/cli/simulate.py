@@ -112,7 +112,16 @@ def describe(model: FeederModel) -> str:
         surface = f'{model.n_actuators} actuator(s)'
     contact = f'coulomb mu = {model.contact.mu:g}' if model.contact.model == 'coulomb' else model.contact.preset
     return (f'{s.waveform} stroke {s.amplitude * 1e6:g} um at {s.frequency:g} Hz x {s.count}, {surface}, '
-            f'part at x0 = {model.particle.x0 * 1e3:g} mm, contact {contact}, landing {model.landing.law}')
+            f'{describe_parts(model)}, contact {contact}, landing {model.landing.law}')
+
+
+def describe_parts(model: FeederModel) -> str:
+    """Where the part starts (``part at x0 = 0.5 mm``), or how many parts start where."""
+    positions = model.particle.start_positions
+    if len(positions) == 1:
+        return f'part at x0 = {positions[0] * 1e3:g} mm'
+    return (f'{len(positions)} parts from x0 = {positions[0] * 1e3:g} to {positions[-1] * 1e3:g} mm, '
+            f'size {model.particle.size * 1e6:g} um, restitution {model.particle.restitution:g}')
 
 
 def format_summary(summary: dict[str, Any]) -> str:
