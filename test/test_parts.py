@@ -12,13 +12,17 @@
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from micro_feeder.physics.dynamics import FeederModel
 from micro_feeder.physics.parameters import ParameterError
 from micro_feeder.physics.particle import ParticleParams
+from micro_feeder.physics.parts import PartsModel
 from micro_feeder.settings import load_settings
 
 G = 9.81
@@ -58,3 +62,128 @@ def test_a_starting_velocity_starts_a_slide_uncounted():
     model = FeederModel.from_settings({'particle.v0': -0.01})
     state = model.initial_state()
     assert state.mode == 'sliding' and state.xdot == -0.01 and sum(state.transitions.values()) == 0
+
+
+# --- the parts model -----------------------------------------------------------------------------------
+
+def _still_track(mu: float, x0: list[float], v0: list[float], restitution: float) -> PartsModel:
+    """Parts on a level track that does not move (stroke amplitude 0), Coulomb friction μ."""
+    return PartsModel.from_settings({
+        'surface.kind': 'track', 'contact.model': 'coulomb', 'contact.mu': mu, 'stroke.amplitude': 0.0,
+        'particle.x0': x0, 'particle.v0': v0, 'particle.restitution': restitution})
+
+
+def _assert_apart_in_order_and_momentum(parts: PartsModel, result) -> None:
+    gaps = np.diff(result.x, axis=1) - parts.size
+    assert gaps.min() >= -1e-12, f'parts overlap by {-gaps.min():.3g} m'
+    for impact in result.state.impacts:
+        scale = sum(abs(v) for v in impact.before) + 1e-300
+        assert abs(sum(impact.before) - sum(impact.after)) <= 1e-14 * scale, impact
+
+
+def test_parts_too_far_apart_to_meet_move_exactly_as_alone():
+    """Three parts on the travelling wave, 0.4 mm apart: each takes the very steps it takes alone."""
+    flat = load_settings(['config/feeder.yaml', 'config/travelling_wave.yaml'], ['stroke.count=20'])
+    starts = [0.6e-3, 1.0e-3, 1.4e-3]
+    parts = PartsModel.from_settings({**flat, 'particle.x0': starts})
+    state = parts.initial_state()
+    parts.advance(state, 0.03)
+    assert state.collisions == 0
+    alone = FeederModel.from_settings(flat)
+    for x0, together in zip(starts, state.parts, strict=True):
+        single = alone.initial_state(x0)
+        alone.advance(single, 0.03)
+        assert single.distance != 0.0
+        assert np.array_equal(single.y, together.y) and single.transitions == together.transitions
+        assert single.max_speed == together.max_speed
+
+
+@pytest.mark.parametrize('restitution', [0.0, 0.5, 1.0])
+def test_sliding_part_into_part_at_rest_closed_form(restitution):
+    """Impact at u = √(v0² − 2μg·gap); after it v = (1 ∓ e) u / 2, and each part slides v²/(2μg) on."""
+    mu, v0, gap = 0.3, 0.05, 200e-6
+    parts = _still_track(mu, [0.0, SIZE + gap], [v0, 0.0], restitution)
+    result = parts.run(duration=0.05, output_step=1e-3)
+    u = math.sqrt(v0 ** 2 - 2 * mu * G * gap)
+    rear, front = (1 - restitution) * u / 2, (1 + restitution) * u / 2
+    expected = [gap + rear ** 2 / (2 * mu * G), SIZE + gap + front ** 2 / (2 * mu * G)]
+    assert np.abs(result.state.positions - expected).max() < 1e-9
+    (impact,) = result.state.impacts
+    # located to the event tolerance (1e-9 s), over which friction changes the speed by μg·1e-9 s
+    assert impact.approach == pytest.approx(u, abs=2 * mu * G * 1e-9)
+    u = impact.approach
+    assert impact.after == pytest.approx(((1 - restitution) * u / 2, (1 + restitution) * u / 2), rel=1e-12)
+    assert [p.mode for p in result.state.parts] == ['stuck', 'stuck']
+    _assert_apart_in_order_and_momentum(parts, result)
+
+
+@pytest.mark.parametrize('gaps', [[50e-6, 0.0, 0.0, 0.0], [50e-6, 30e-6, 20e-6, 10e-6]])
+def test_newtons_cradle_passes_the_velocity_down_the_row(gaps):
+    """e = 1: each part stops where it hits the next, which carries the velocity on (less μg over each gap);
+    the last slides v²/(2μg)."""
+    mu, v0 = 0.2, 0.05
+    starts = np.cumsum([0.0] + [SIZE + g for g in gaps]).tolist()
+    parts = _still_track(mu, starts, [v0] + [0.0] * len(gaps), 1.0)
+    result = parts.run(duration=0.1, output_step=1e-3)
+    speed, expected = v0, []
+    for k, gap in enumerate(gaps):
+        speed = math.sqrt(speed ** 2 - 2 * mu * G * gap)
+        expected.append(starts[k + 1] - SIZE)
+    expected.append(starts[-1] + speed ** 2 / (2 * mu * G))
+    assert np.abs(result.state.positions - expected).max() < 1e-9
+    assert result.state.collisions == len(gaps)
+    _assert_apart_in_order_and_momentum(parts, result)
+
+
+def test_a_struck_part_takes_the_mode_its_velocity_gives():
+    model = FeederModel.from_settings({'surface.kind': 'track', 'contact.model': 'coulomb', 'contact.mu': 0.1,
+                                       'stroke.amplitude': 0.0, 'track.inclination': 0.3})
+    state = model.initial_state()
+    assert [e.kind for e in model.set_velocity(state, 0.01)] == ['stick_to_slip'] and state.mode == 'sliding'
+    # at rest on a slope steeper than μ allows: it cannot stick, and slides downhill (x runs uphill)
+    assert len(model.set_velocity(state, 0.0)) == 0 and state.mode == 'sliding' and state.xdot == 0.0
+    model.advance(state, 0.01)
+    assert state.xdot < 0.0
+    held = model.replace(contact=model.contact.replace(mu=1.0))
+    state = held.initial_state()
+    held.set_velocity(state, 0.01)
+    assert [e.kind for e in held.set_velocity(state, 0.0)] == ['slip_to_stick'] and state.mode == 'stuck'
+    flying = held.flying_state(0.0, 1e-3, 0.0, 0.0)
+    assert len(held.set_velocity(flying, -0.02)) == 0 and flying.mode == 'flying' and flying.xdot == -0.02
+
+
+def test_a_crowded_travelling_wave_keeps_parts_apart_in_order():
+    """Ten parts 30 µm apart on the travelling wave, plastic and bouncing: they meet, press into trains, and
+    never overlap or pass each other; momentum is conserved in every impact."""
+    flat = load_settings(['config/feeder.yaml', 'config/travelling_wave.yaml'], ['stroke.count=20'])
+    for restitution in (0.0, 0.5):
+        starts = (0.4e-3 + 0.13e-3 * np.arange(10)).tolist()
+        parts = PartsModel.from_settings({**flat, 'particle.x0': starts, 'particle.restitution': restitution})
+        result = parts.run(duration=0.03, output_step=1e-4)
+        assert result.state.collisions > 10
+        _assert_apart_in_order_and_momentum(parts, result)
+
+
+EXAMPLES = int(os.environ.get('MF_PARTS_EXAMPLES', '25'))
+
+
+@st.composite
+def track_scenarios(draw) -> dict:
+    n = draw(st.integers(2, 5))
+    gaps = draw(st.lists(st.floats(0.0, 300e-6), min_size=n - 1, max_size=n - 1))
+    return {'surface.kind': 'track', 'contact.model': 'coulomb', 'stroke.waveform': 'sine',
+            'stroke.frequency': 100.0, 'stroke.count': 5, 'contact.mu': draw(st.floats(0.2, 0.8)),
+            'stroke.amplitude': draw(st.floats(0.0, 100e-6)),
+            'landing.law': draw(st.sampled_from(['keep', 'coulomb', 'stick'])),
+            'particle.x0': np.cumsum([0.0] + [SIZE + g for g in gaps]).tolist(),
+            'particle.v0': draw(st.lists(st.floats(-0.05, 0.05), min_size=n, max_size=n)),
+            'particle.restitution': draw(st.floats(0.0, 1.0))}
+
+
+@settings(max_examples=EXAMPLES, derandomize=True, deadline=None, database=None,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(scenario=track_scenarios())
+def test_drawn_scenarios_never_overlap_or_reorder(scenario):
+    parts = PartsModel.from_settings(scenario)
+    result = parts.run(duration=0.05, output_step=1e-3)
+    _assert_apart_in_order_and_momentum(parts, result)
