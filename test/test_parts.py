@@ -11,6 +11,9 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
+import json
 import math
 import os
 
@@ -19,10 +22,12 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from micro_feeder.cli import main
 from micro_feeder.physics.dynamics import FeederModel
 from micro_feeder.physics.parameters import ParameterError
 from micro_feeder.physics.particle import ParticleParams
 from micro_feeder.physics.parts import PartsModel
+from micro_feeder.physics.parts.figures import gate_crossings, gate_figures, spacing_figures
 from micro_feeder.settings import load_settings
 
 G = 9.81
@@ -187,3 +192,31 @@ def test_drawn_scenarios_never_overlap_or_reorder(scenario):
     parts = PartsModel.from_settings(scenario)
     result = parts.run(duration=0.05, output_step=1e-3)
     _assert_apart_in_order_and_momentum(parts, result)
+
+
+def test_gate_counts_forward_crossings_at_their_interpolated_times():
+    t = np.array([0.0, 1.0, 2.0, 3.0])
+    x = np.array([[0.0, 5.0], [2.0, 5.0], [0.0, 7.0], [4.0, 3.0]])     # part 0 passes x = 1 twice, part 1 never
+    assert gate_crossings(t, x, 1.0).tolist() == [0.5, 2.25]
+    figures = gate_figures(t, x, 1.0)
+    assert figures['crossings'] == 2 and figures['feed_rate_hz'] == 2 / 3 and figures['headway_s'] == 1.75
+    assert spacing_figures([3e-4, 1e-4, 6e-4]) == pytest.approx({'spacing_mean_m': 2.5e-4, 'spacing_min_m': 2e-4})
+
+
+def test_simulate_reports_every_part_the_impacts_and_the_gate(tmp_path):
+    """``micro-feeder simulate --json`` with two parts: the slide into a part at rest at e = 1 hands the
+    velocity on, so the front part alone passes a gate ahead of it; one impact."""
+    out = io.StringIO()
+    settings = {'surface.kind': 'track', 'contact.model': 'coulomb', 'contact.mu': 0.3, 'stroke.amplitude': 0.0,
+                'particle.x0': [0.0, 3e-4], 'particle.v0': [0.05, 0.0], 'particle.restitution': 1.0}
+    args = [arg for name, value in settings.items() for arg in ('--set', f'{name}={value!r}')]
+    with contextlib.redirect_stdout(out):
+        assert main(['simulate', *args, '--duration', '0.05', '--gate', '4e-4', '--json', '--out', str(tmp_path),
+                     '--plot']) == 0
+    summary = json.loads(out.getvalue())
+    assert summary['collisions'] == 1 and summary['crossings'] == 1 and summary['feed_rate_hz'] == 1 / 0.05
+    assert [part['final_mode'] for part in summary['parts']] == ['stuck', 'stuck']
+    assert summary['parts'][0]['distance_m'] == pytest.approx(2e-4, abs=1e-9)
+    assert summary['parts'][0]['transitions']['slip_to_stick'] == 1
+    assert (tmp_path / 'simulate.png').stat().st_size > 0 and (tmp_path / 'simulate.csv').read_text().startswith(
+        't,x_0,mode_0,x_1,mode_1')
