@@ -15,6 +15,8 @@ import numpy as np
 
 from ..physics.dynamics import MODES, FeederModel, RunResult, SimulationError
 from ..physics.parameters import ParameterError
+from ..physics.parts import PartsModel, PartsResult
+from ..physics.parts.figures import gate_figures, spacing_figures
 from ..settings import SettingsError
 from . import CommandError
 from ._common import add_model_options, settings_from_args
@@ -29,6 +31,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         epilog='Examples: micro-feeder simulate --plot; micro-feeder simulate --set stroke.frequency=3000 '
                '--duration 0.3 --json; micro-feeder simulate --params config/feeder.yaml --out out')
     add_run_options(parser, 'simulate')
+    parser.add_argument('--gate', type=float, metavar='X',
+                        help='report the feed rate past x = X (m): parts per second crossing it forward, and the '
+                             'spacing between neighbouring parts (several parts: particle.x0 as a list)')
     parser.set_defaults(func=run)
 
 
@@ -73,6 +78,8 @@ def run(args: argparse.Namespace) -> int:
     if args.duration is not None and not (np.isfinite(args.duration) and args.duration > 0):
         raise CommandError(f'--duration must be a positive number of seconds, got {args.duration}')
     model.run(duration=1e-6)              # load the compiled kernel (numba cache) before timing
+    if model.particle.n_parts > 1:
+        return run_parts(args, model)
     started = time.perf_counter()
     try:
         length = model.default_duration() if args.duration is None else args.duration
@@ -81,6 +88,8 @@ def run(args: argparse.Namespace) -> int:
     except SimulationError as err:
         raise CommandError(str(err)) from err
     summary = {**result.summary(), 'wall_time_s': time.perf_counter() - started}
+    if args.gate is not None:
+        summary.update(gate_figures(result['t'], result['x'], args.gate))
     out = Path(args.out)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -102,6 +111,72 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def run_parts(args: argparse.Namespace, model: FeederModel) -> int:
+    """``simulate`` with several parts: per-part figures, impacts, the gate and spacing figures, the
+    positions of every part against time (CSV, and the space–time picture with --plot)."""
+    parts = PartsModel(model)
+    started = time.perf_counter()
+    try:
+        length = model.default_duration() if args.duration is None else args.duration
+        result = parts.run(duration=args.duration, output_step=max(0.005 / model.stroke.frequency, length / 5000))
+    except SimulationError as err:
+        raise CommandError(str(err)) from err
+    summary = {**result.summary(), 'wall_time_s': time.perf_counter() - started,
+               **spacing_figures(result.state.positions),
+               **(gate_figures(result.t, result.x, args.gate) if args.gate is not None else {})}
+    out = Path(args.out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        csv_path = write_parts_csv(result, out / 'simulate.csv')
+        plot_path = None
+        if args.plot is not None:
+            from ..plots.parts import plot_space_time
+            plot_path = plot_space_time(result, Path(args.plot) if args.plot else out / 'simulate.png',
+                                        title=describe(model), gate=args.gate, size=model.particle.size)
+    except OSError as err:
+        raise CommandError(f'cannot write to {err.filename}: {err.strerror}') from err
+    if args.json:
+        json.dump(summary, sys.stdout)
+        print()
+        return 0
+    print(describe(model))
+    print(format_parts_summary(summary))
+    print(f'positions written to {csv_path}' + (f', plot to {plot_path}' if plot_path else ''))
+    return 0
+
+
+def write_parts_csv(result: PartsResult, path: Path) -> Path:
+    """Every part's position (m) and mode at each sample: columns t, x_0, mode_0, x_1, mode_1 ..."""
+    n = result.x.shape[1]
+    with path.open('w', newline='') as handle:
+        writer = csv.writer(handle)
+        writer.writerow(['t', *(name for k in range(n) for name in (f'x_{k}', f'mode_{k}'))])
+        for t, xs, modes in zip(result.t, result.x, result.modes, strict=True):
+            writer.writerow([repr(float(t)), *(value for x, mode in zip(xs, modes, strict=True)
+                                                for value in (repr(float(x)), MODES[int(mode)]))])
+    return path
+
+
+def format_parts_summary(summary: dict[str, Any]) -> str:
+    """The human summary of a many-part run: one line per part, impacts, spacing and the gate."""
+    lines = ['part  distance (um)  final mode  transitions (stick_to_slip, slip_to_stick, take_off, landing)']
+    for k, part in enumerate(summary['parts']):
+        counts = ', '.join(str(v) for v in part['transitions'].values())
+        lines.append(f"{k:>4}  {part['distance_m'] * 1e6:>13.6g}  {part['final_mode']:<10}  {counts}")
+    lines.append(f"impacts      {summary['collisions']}")
+    if summary.get('spacing_mean_m') is not None:
+        lines.append(f"spacing      mean {summary['spacing_mean_m'] * 1e6:.6g} um, "
+                     f"min {summary['spacing_min_m'] * 1e6:.6g} um"
+                     ' between neighbouring centres at the end')
+    if 'gate_m' in summary:
+        rate = summary['feed_rate_hz']
+        lines.append(f"gate         x = {summary['gate_m'] * 1e3:g} mm: {summary['crossings']} crossing(s), "
+                     f"feed rate {rate if rate is None else f'{rate:.6g}'} parts/s")
+    lines.append(f"sim time     {summary['sim_time_s'] * 1e3:.4g} ms in {summary['wall_time_s'] * 1e3:.1f} ms wall"
+                 + ('' if summary['settled'] else ' (not every part settled)'))
+    return '\n'.join(lines)
+
+
 def describe(model: FeederModel) -> str:
     """One line naming the stroke and the part's position."""
     s = model.stroke
@@ -112,7 +187,16 @@ def describe(model: FeederModel) -> str:
         surface = f'{model.n_actuators} actuator(s)'
     contact = f'coulomb mu = {model.contact.mu:g}' if model.contact.model == 'coulomb' else model.contact.preset
     return (f'{s.waveform} stroke {s.amplitude * 1e6:g} um at {s.frequency:g} Hz x {s.count}, {surface}, '
-            f'part at x0 = {model.particle.x0 * 1e3:g} mm, contact {contact}, landing {model.landing.law}')
+            f'{describe_parts(model)}, contact {contact}, landing {model.landing.law}')
+
+
+def describe_parts(model: FeederModel) -> str:
+    """Where the part starts (``part at x0 = 0.5 mm``), or how many parts start where."""
+    positions = model.particle.start_positions
+    if len(positions) == 1:
+        return f'part at x0 = {positions[0] * 1e3:g} mm'
+    return (f'{len(positions)} parts from x0 = {positions[0] * 1e3:g} to {positions[-1] * 1e3:g} mm, '
+            f'size {model.particle.size * 1e6:g} um, restitution {model.particle.restitution:g}')
 
 
 def format_summary(summary: dict[str, Any]) -> str:
@@ -127,4 +211,6 @@ def format_summary(summary: dict[str, Any]) -> str:
         *([f"conveying    {summary['mean_velocity_mps'] * 1e3:.6g} mm/s mean over the burst's second half"]
           if summary.get('mean_velocity_mps') is not None else []),
         *([f"throw number {summary['throw_number']:.4g}"] if summary.get('throw_number') is not None else []),
+        *([f"gate         x = {summary['gate_m'] * 1e3:g} mm: {summary['crossings']} crossing(s), feed rate "
+           f"{summary['feed_rate_hz']:.6g} parts/s"] if 'gate_m' in summary else []),
         f"sim time     {summary['sim_time_s'] * 1e3:.4g} ms in {summary['wall_time_s'] * 1e3:.1f} ms wall"])

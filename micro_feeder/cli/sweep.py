@@ -22,7 +22,7 @@ from ..settings import SettingsError
 from . import CommandError
 from ._common import settings_from_args
 from ._explore import add_runner_options, runner_from_args
-from .simulate import add_run_options
+from .simulate import add_run_options, describe_parts
 
 SHOWN_ROWS = 40   # the terminal table shows at most this many rows (the CSV has them all)
 
@@ -113,7 +113,7 @@ def describe_runs(job: Job, plan: RunPlan) -> str:
     parts = [f'{s.count} {s.waveform} stroke{"s" * (s.count > 1)} per run' if 'stroke.count' not in plan.columns
              else f'{s.waveform} strokes']
     for name, text in (('stroke.amplitude', f'{s.amplitude * 1e6:g} µm'), ('stroke.frequency', f'{s.frequency:g} Hz'),
-                       ('particle.x0', f'part at x0 = {model.particle.x0 * 1e3:g} mm')):
+                       ('particle.x0', describe_parts(model))):
         if name not in plan.columns:
             parts.append(text)
     parts += [f'{a.name} = {a.value(0):g}' for a in getattr(plan.design, 'axes', ()) if len(a) == 1]

@@ -26,7 +26,8 @@ SpecTable = Mapping[str, tuple[ParamSpec, Any]]
 
 _ROS_TYPES = {'float': ParameterType.PARAMETER_DOUBLE, 'int': ParameterType.PARAMETER_INTEGER,
               'bool': ParameterType.PARAMETER_BOOL, 'str': ParameterType.PARAMETER_STRING,
-              'float_list': ParameterType.PARAMETER_DOUBLE_ARRAY}
+              'float_list': ParameterType.PARAMETER_DOUBLE_ARRAY,
+              'float_or_list': ParameterType.PARAMETER_DOUBLE}     # dynamically typed: a double or an array
 _INT64 = 2 ** 63 - 1
 
 
@@ -37,6 +38,7 @@ def descriptor(name: str, spec: ParamSpec) -> ParameterDescriptor:
     exactly by :func:`check_changes`. One-sided bounds use the largest finite value as the open end.
     """
     desc = ParameterDescriptor(name=name, type=_ROS_TYPES[spec.kind], read_only=spec.read_only,
+                               dynamic_typing=spec.kind == 'float_or_list',
                                description=spec.description + (f' [{spec.unit}]' if spec.unit else ''),
                                additional_constraints=spec.allowed())
     low = spec.ge if spec.ge is not None else spec.gt
@@ -57,9 +59,9 @@ def descriptor(name: str, spec: ParamSpec) -> ParameterDescriptor:
 def _ros_value(spec: ParamSpec, value: Any) -> Any:
     """A value as ROS expects it for the spec's type (ints in a float list or a float parameter -> float),
     so that ``frequency: 1000`` in a YAML file is not a type error."""
-    if spec.kind == 'float' and isinstance(value, int) and not isinstance(value, bool):
+    if spec.kind in ('float', 'float_or_list') and isinstance(value, int) and not isinstance(value, bool):
         return float(value)
-    if spec.kind == 'float_list' and isinstance(value, (list, tuple)):
+    if spec.kind in ('float_list', 'float_or_list') and isinstance(value, (list, tuple)):
         return [float(v) if isinstance(v, int) and not isinstance(v, bool) else v for v in value]
     return value
 

@@ -31,8 +31,9 @@ class ParameterError(ValueError):
 class ParamSpec:
     """What a parameter means and which values it accepts.
 
-    ``kind`` is ``float``, ``int``, ``bool``, ``str`` or ``float_list``. Bounds apply to every element of
-    a list. ``name`` overrides the dotted name (for top-level names such as ``gravity``).
+    ``kind`` is ``float``, ``int``, ``bool``, ``str``, ``float_list`` or ``float_or_list`` (a number, kept as a
+    float, or a list of numbers, kept as a tuple: one value per part). Bounds apply to every element of a
+    list. ``name`` overrides the dotted name (for top-level names such as ``gravity``).
     """
 
     description: str
@@ -61,10 +62,16 @@ class ParamSpec:
         text = noun + (' ' + ' and '.join(bounds) if bounds else '')
         if self.kind == 'float_list':
             text = f'a list of at least {self.min_length} numbers, each {text}'
+        if self.kind == 'float_or_list':
+            text = f'{text}, or a non-empty list of such numbers'
         return text
 
     def check(self, name: str, value: Any) -> Any:
         """Return ``value`` converted to the parameter's type, or raise :class:`ParameterError`."""
+        if self.kind == 'float_or_list' and isinstance(value, Sequence) and not isinstance(value, (str, bytes)):
+            if not value:
+                raise ParameterError(name, value, self.allowed())
+            return tuple(self._check_number(name, v, value) for v in value)
         if self.kind == 'float_list':
             if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
                 raise ParameterError(name, value, self.allowed())

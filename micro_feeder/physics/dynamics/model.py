@@ -291,9 +291,18 @@ class FeederModel:
         """End of the last stroke plus ``integration.settling_time`` (s)."""
         return self.stroke.burst_end_s() + self.integration.settling_time
 
-    def initial_state(self, x0: float | None = None) -> FeederState:
-        """t = 0, part stuck at ``x0`` (default ``particle.x0``), at rest."""
-        return FeederState(self._n_stacks, self.particle.x0 if x0 is None else x0)
+    def initial_state(self, x0: float | None = None, v0: float | None = None) -> FeederState:
+        """t = 0, part at ``x0`` (m, default the first ``particle.x0``) with velocity ``v0`` (m/s, default the
+        first ``particle.v0``): stuck at rest, or sliding in the direction of ``v0`` when it is not 0 (a start,
+        not a counted transition)."""
+        state = FeederState(self._n_stacks, self.particle.start_positions[0] if x0 is None else x0)
+        v0 = self.particle.start_velocities[0] if v0 is None else v0
+        if v0 != 0.0:
+            state.y[1] = v0
+            state.iv[layout.IV_MODE] = layout.SLIDING
+            state.iv[layout.IV_DIR] = 1 if v0 > 0.0 else -1
+            state.fs[layout.FS_MAX_SPEED] = abs(v0)
+        return state
 
     def flying_state(self, x: float, z: float, vx: float, vz: float, t: float = 0.0) -> FeederState:
         """A part in flight at (x, z) (m) with velocity (vx, vz) (m/s) at time ``t``."""
@@ -302,6 +311,63 @@ class FeederModel:
         state.iv[layout.IV_MODE] = layout.FLYING
         state.fs[layout.FS_T] = t
         return state
+
+    def set_velocity(self, state: FeederState, xdot: float,
+                     source: StrokeTable | StrokeSchedule | None = None) -> EventList:
+        """Give the part the velocity ``xdot`` (m/s, along x) at ``state.t``, as an impact does, and set its
+        mode accordingly; returns the mode change (empty or one event, counted in ``state.transitions``).
+
+        A flying part keeps flying (its v_x changes). A part on the surface slides in the direction of
+        ``xdot`` when it is not 0; at ``xdot`` = 0 it is stuck when the stick criterion |T_req| <= Q_max
+        holds there (docs/dynamics.md §1), else it starts sliding from rest in the direction friction
+        opposes, as at a ``stick_to_slip``. The step the state kept past its last target is dropped.
+        """
+        self._check_state(state)
+        old_mode = int(state.iv[layout.IV_MODE])
+        state.y[1] = xdot
+        state.fs[layout.FS_AHEAD_T1] = math.nan
+        state.iv[layout.IV_START_KNOWN] = 0
+        state.fs[layout.FS_MAX_SPEED] = max(state.fs[layout.FS_MAX_SPEED], abs(xdot))
+        if old_mode == layout.FLYING:
+            return EventList()
+        if xdot != 0.0:
+            new_mode, direction, fresh = layout.SLIDING, 1 if xdot > 0.0 else -1, 0
+        else:
+            required, limit = self.friction_at_rest(state, source)
+            if abs(required) <= limit:
+                new_mode, direction, fresh = layout.STUCK, 0, 0
+            else:
+                new_mode, direction, fresh = layout.SLIDING, -1 if required > 0.0 else 1, 1
+        state.iv[layout.IV_DIR] = direction
+        state.iv[layout.IV_FRESH] = fresh
+        if new_mode == old_mode:
+            return EventList()
+        kind, counter = ((layout.STICK_TO_SLIP, layout.IV_STICK_TO_SLIP) if new_mode == layout.SLIDING
+                         else (layout.SLIP_TO_STICK, layout.IV_SLIP_TO_STICK))
+        state.iv[counter] += 1
+        state.iv[layout.IV_PREV_MODE] = old_mode
+        state.iv[layout.IV_MODE] = new_mode
+        state.iv[layout.IV_ENTRY_COUNTER] = counter
+        state.fs[layout.FS_T_ENTRY] = state.t
+        return EventList(np.array([[kind, old_mode, new_mode]], dtype=np.int64), np.array([[state.t, state.x]]))
+
+    def friction_at_rest(self, state: FeederState, source: StrokeTable | StrokeSchedule | None = None
+                         ) -> tuple[float, float]:
+        """(T_req, Q_max) (N) for the part at rest on the surface where ``state`` has it at ``state.t``: the
+        friction that would keep it stuck and the most the contact can give (docs/dynamics.md §1)."""
+        at_rest = state.copy()
+        at_rest.y[1:4] = 0.0
+        at_rest.iv[layout.IV_MODE] = layout.STUCK
+        obs = self.observe(at_rest, source)                # friction is T_req while stuck
+        return obs.friction, obs.q_max
+
+    def move_to(self, state: FeederState, x: float) -> None:
+        """Put the part at ``x`` (m) at ``state.t``, mode and velocity unchanged (how a train of parts
+        pressed together keeps its parts apart, docs/parts.md); drops the step the state kept ahead."""
+        self._check_state(state)
+        state.y[0] = x
+        state.fs[layout.FS_AHEAD_T1] = math.nan
+        state.iv[layout.IV_START_KNOWN] = 0
 
     def advance(self, state: FeederState, t_target: float,
                 source: StrokeTable | StrokeSchedule | None = None) -> EventList:
@@ -314,6 +380,19 @@ class FeederModel:
         """
         events, _ = self._integrate(state, t_target, source, record=False)
         return events
+
+    def advance_with_peak_speed(self, state: FeederState, t_target: float,
+                                source: StrokeTable | StrokeSchedule | None = None) -> tuple[EventList, float]:
+        """:meth:`advance`, and the largest |ẋ| (m/s; |v_x| in flight) at the state's start, its step ends and its
+        events on the way: how far the part may have gone in between (docs/parts.md). ``state.max_speed``
+        keeps the run's largest as before."""
+        run_max = state.fs[layout.FS_MAX_SPEED]
+        state.fs[layout.FS_MAX_SPEED] = abs(state.y[1])
+        try:
+            events = self.advance(state, t_target, source)
+            return events, float(state.fs[layout.FS_MAX_SPEED])
+        finally:
+            state.fs[layout.FS_MAX_SPEED] = max(run_max, state.fs[layout.FS_MAX_SPEED])
 
     def settle(self, state: FeederState, source: StrokeTable | StrokeSchedule | None = None,
                max_time: float | None = None, step: float | None = None) -> EventList:

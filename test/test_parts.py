@@ -1,0 +1,222 @@
+"""Many parts on one feeder (issue 28; docs/parts.md), against closed forms and invariants.
+
+* Parameters: ``particle.x0`` / ``particle.v0`` as a number (one part, the model of before, bit for bit) or
+  a list, refused with the reason when parts overlap, are out of order or the lists disagree.
+* Parts too far apart to meet take the very steps each takes alone (bit for bit).
+* A part sliding at v0 into a part at rest on a still, level track with Coulomb friction μ: impact speed
+  u = √(v0² − 2μg·gap), Newton's restitution, then each part slides v²/(2μg) further (to 1e-9 m).
+* A row at e = 1 passes the velocity down the row (Newton's cradle), touching or with gaps.
+* Drawn scenarios on a vibrating track: no overlap, no reordering, momentum conserved in every impact.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+import os
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from micro_feeder.cli import main
+from micro_feeder.physics.dynamics import FeederModel
+from micro_feeder.physics.parameters import ParameterError
+from micro_feeder.physics.particle import ParticleParams
+from micro_feeder.physics.parts import PartsModel
+from micro_feeder.physics.parts.figures import gate_crossings, gate_figures, spacing_figures
+from micro_feeder.settings import load_settings
+
+G = 9.81
+SIZE = 100e-6
+
+
+def test_one_number_is_one_part_as_before():
+    """``particle.x0`` a number: one part, the default v0 = 0 leaves it stuck at rest (the state of before)."""
+    params = ParticleParams(x0=0.5e-3)
+    assert params.n_parts == 1 and params.start_positions == (0.5e-3,) and params.start_velocities == (0.0,)
+    model = FeederModel.from_settings(load_settings(['config/feeder.yaml']))
+    state = model.initial_state()
+    assert state.mode == 'stuck' and state.x == 0.5e-3 and state.xdot == 0.0 and state.max_speed == 0.0
+
+
+def test_lists_place_one_part_per_entry():
+    params = ParticleParams(x0=[0.0, 1e-4, 3e-4], v0=0.01, size=1e-4)
+    assert params.start_positions == (0.0, 1e-4, 3e-4) and params.start_velocities == (0.01,) * 3
+    assert ParticleParams(x0=[0.0, 2e-4], v0=[0.0, -0.02]).start_velocities == (0.0, -0.02)
+
+
+@pytest.mark.parametrize('values, name, reason', [
+    ({'x0': [0.0, 5e-5]}, 'particle.x0', 'at least particle.size = 0.0001 m apart (0 and 5e-05 are not)'),
+    ({'x0': [3e-4, 0.0]}, 'particle.x0', 'increasing order'),
+    ({'x0': []}, 'particle.x0', 'non-empty list'),
+    ({'x0': [0.0, 1e-3], 'v0': [0.0, 0.0, 0.0]}, 'particle.v0', 'one entry per particle.x0 entry (2)'),
+    ({'restitution': 1.5}, 'particle.restitution', '<= 1'),
+    ({'size': 0.0}, 'particle.size', '> 0'),
+])
+def test_refused_with_the_reason(values, name, reason):
+    with pytest.raises(ParameterError) as err:
+        ParticleParams(**values)
+    assert err.value.name == name and reason in str(err.value)
+
+
+def test_a_starting_velocity_starts_a_slide_uncounted():
+    model = FeederModel.from_settings({'particle.v0': -0.01})
+    state = model.initial_state()
+    assert state.mode == 'sliding' and state.xdot == -0.01 and sum(state.transitions.values()) == 0
+
+
+# --- the parts model -----------------------------------------------------------------------------------
+
+def _still_track(mu: float, x0: list[float], v0: list[float], restitution: float) -> PartsModel:
+    """Parts on a level track that does not move (stroke amplitude 0), Coulomb friction μ."""
+    return PartsModel.from_settings({
+        'surface.kind': 'track', 'contact.model': 'coulomb', 'contact.mu': mu, 'stroke.amplitude': 0.0,
+        'particle.x0': x0, 'particle.v0': v0, 'particle.restitution': restitution})
+
+
+def _assert_apart_in_order_and_momentum(parts: PartsModel, result) -> None:
+    gaps = np.diff(result.x, axis=1) - parts.size
+    assert gaps.min() >= -1e-12, f'parts overlap by {-gaps.min():.3g} m'
+    for impact in result.state.impacts:
+        scale = sum(abs(v) for v in impact.before) + 1e-300
+        assert abs(sum(impact.before) - sum(impact.after)) <= 1e-14 * scale, impact
+
+
+def test_parts_too_far_apart_to_meet_move_exactly_as_alone():
+    """Three parts on the travelling wave, 0.4 mm apart: each takes the very steps it takes alone."""
+    flat = load_settings(['config/feeder.yaml', 'config/travelling_wave.yaml'], ['stroke.count=20'])
+    starts = [0.6e-3, 1.0e-3, 1.4e-3]
+    parts = PartsModel.from_settings({**flat, 'particle.x0': starts})
+    state = parts.initial_state()
+    parts.advance(state, 0.03)
+    assert state.collisions == 0
+    alone = FeederModel.from_settings(flat)
+    for x0, together in zip(starts, state.parts, strict=True):
+        single = alone.initial_state(x0)
+        alone.advance(single, 0.03)
+        assert single.distance != 0.0
+        assert np.array_equal(single.y, together.y) and single.transitions == together.transitions
+        assert single.max_speed == together.max_speed
+
+
+@pytest.mark.parametrize('restitution', [0.0, 0.5, 1.0])
+def test_sliding_part_into_part_at_rest_closed_form(restitution):
+    """Impact at u = √(v0² − 2μg·gap); after it v = (1 ∓ e) u / 2, and each part slides v²/(2μg) on."""
+    mu, v0, gap = 0.3, 0.05, 200e-6
+    parts = _still_track(mu, [0.0, SIZE + gap], [v0, 0.0], restitution)
+    result = parts.run(duration=0.05, output_step=1e-3)
+    u = math.sqrt(v0 ** 2 - 2 * mu * G * gap)
+    rear, front = (1 - restitution) * u / 2, (1 + restitution) * u / 2
+    expected = [gap + rear ** 2 / (2 * mu * G), SIZE + gap + front ** 2 / (2 * mu * G)]
+    assert np.abs(result.state.positions - expected).max() < 1e-9
+    (impact,) = result.state.impacts
+    # located to the event tolerance (1e-9 s), over which friction changes the speed by μg·1e-9 s
+    assert impact.approach == pytest.approx(u, abs=2 * mu * G * 1e-9)
+    u = impact.approach
+    assert impact.after == pytest.approx(((1 - restitution) * u / 2, (1 + restitution) * u / 2), rel=1e-12)
+    assert [p.mode for p in result.state.parts] == ['stuck', 'stuck']
+    _assert_apart_in_order_and_momentum(parts, result)
+
+
+@pytest.mark.parametrize('gaps', [[50e-6, 0.0, 0.0, 0.0], [50e-6, 30e-6, 20e-6, 10e-6]])
+def test_newtons_cradle_passes_the_velocity_down_the_row(gaps):
+    """e = 1: each part stops where it hits the next, which carries the velocity on (less μg over each gap);
+    the last slides v²/(2μg)."""
+    mu, v0 = 0.2, 0.05
+    starts = np.cumsum([0.0] + [SIZE + g for g in gaps]).tolist()
+    parts = _still_track(mu, starts, [v0] + [0.0] * len(gaps), 1.0)
+    result = parts.run(duration=0.1, output_step=1e-3)
+    speed, expected = v0, []
+    for k, gap in enumerate(gaps):
+        speed = math.sqrt(speed ** 2 - 2 * mu * G * gap)
+        expected.append(starts[k + 1] - SIZE)
+    expected.append(starts[-1] + speed ** 2 / (2 * mu * G))
+    assert np.abs(result.state.positions - expected).max() < 1e-9
+    assert result.state.collisions == len(gaps)
+    _assert_apart_in_order_and_momentum(parts, result)
+
+
+def test_a_struck_part_takes_the_mode_its_velocity_gives():
+    model = FeederModel.from_settings({'surface.kind': 'track', 'contact.model': 'coulomb', 'contact.mu': 0.1,
+                                       'stroke.amplitude': 0.0, 'track.inclination': 0.3})
+    state = model.initial_state()
+    assert [e.kind for e in model.set_velocity(state, 0.01)] == ['stick_to_slip'] and state.mode == 'sliding'
+    # at rest on a slope steeper than μ allows: it cannot stick, and slides downhill (x runs uphill)
+    assert len(model.set_velocity(state, 0.0)) == 0 and state.mode == 'sliding' and state.xdot == 0.0
+    model.advance(state, 0.01)
+    assert state.xdot < 0.0
+    held = model.replace(contact=model.contact.replace(mu=1.0))
+    state = held.initial_state()
+    held.set_velocity(state, 0.01)
+    assert [e.kind for e in held.set_velocity(state, 0.0)] == ['slip_to_stick'] and state.mode == 'stuck'
+    flying = held.flying_state(0.0, 1e-3, 0.0, 0.0)
+    assert len(held.set_velocity(flying, -0.02)) == 0 and flying.mode == 'flying' and flying.xdot == -0.02
+
+
+def test_a_crowded_travelling_wave_keeps_parts_apart_in_order():
+    """Ten parts 30 µm apart on the travelling wave, plastic and bouncing: they meet, press into trains, and
+    never overlap or pass each other; momentum is conserved in every impact."""
+    flat = load_settings(['config/feeder.yaml', 'config/travelling_wave.yaml'], ['stroke.count=20'])
+    for restitution in (0.0, 0.5):
+        starts = (0.4e-3 + 0.13e-3 * np.arange(10)).tolist()
+        parts = PartsModel.from_settings({**flat, 'particle.x0': starts, 'particle.restitution': restitution})
+        result = parts.run(duration=0.03, output_step=1e-4)
+        assert result.state.collisions > 10
+        _assert_apart_in_order_and_momentum(parts, result)
+
+
+EXAMPLES = int(os.environ.get('MF_PARTS_EXAMPLES', '25'))
+
+
+@st.composite
+def track_scenarios(draw) -> dict:
+    n = draw(st.integers(2, 5))
+    gaps = draw(st.lists(st.floats(0.0, 300e-6), min_size=n - 1, max_size=n - 1))
+    return {'surface.kind': 'track', 'contact.model': 'coulomb', 'stroke.waveform': 'sine',
+            'stroke.frequency': 100.0, 'stroke.count': 5, 'contact.mu': draw(st.floats(0.2, 0.8)),
+            'stroke.amplitude': draw(st.floats(0.0, 100e-6)),
+            'landing.law': draw(st.sampled_from(['keep', 'coulomb', 'stick'])),
+            'particle.x0': np.cumsum([0.0] + [SIZE + g for g in gaps]).tolist(),
+            'particle.v0': draw(st.lists(st.floats(-0.05, 0.05), min_size=n, max_size=n)),
+            'particle.restitution': draw(st.floats(0.0, 1.0))}
+
+
+@settings(max_examples=EXAMPLES, derandomize=True, deadline=None, database=None,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(scenario=track_scenarios())
+def test_drawn_scenarios_never_overlap_or_reorder(scenario):
+    parts = PartsModel.from_settings(scenario)
+    result = parts.run(duration=0.05, output_step=1e-3)
+    _assert_apart_in_order_and_momentum(parts, result)
+
+
+def test_gate_counts_forward_crossings_at_their_interpolated_times():
+    t = np.array([0.0, 1.0, 2.0, 3.0])
+    x = np.array([[0.0, 5.0], [2.0, 5.0], [0.0, 7.0], [4.0, 3.0]])     # part 0 passes x = 1 twice, part 1 never
+    assert gate_crossings(t, x, 1.0).tolist() == [0.5, 2.25]
+    figures = gate_figures(t, x, 1.0)
+    assert figures['crossings'] == 2 and figures['feed_rate_hz'] == 2 / 3 and figures['headway_s'] == 1.75
+    assert spacing_figures([3e-4, 1e-4, 6e-4]) == pytest.approx({'spacing_mean_m': 2.5e-4, 'spacing_min_m': 2e-4})
+
+
+def test_simulate_reports_every_part_the_impacts_and_the_gate(tmp_path):
+    """``micro-feeder simulate --json`` with two parts: the slide into a part at rest at e = 1 hands the
+    velocity on, so the front part alone passes a gate ahead of it; one impact."""
+    out = io.StringIO()
+    settings = {'surface.kind': 'track', 'contact.model': 'coulomb', 'contact.mu': 0.3, 'stroke.amplitude': 0.0,
+                'particle.x0': [0.0, 3e-4], 'particle.v0': [0.05, 0.0], 'particle.restitution': 1.0}
+    args = [arg for name, value in settings.items() for arg in ('--set', f'{name}={value!r}')]
+    with contextlib.redirect_stdout(out):
+        assert main(['simulate', *args, '--duration', '0.05', '--gate', '4e-4', '--json', '--out', str(tmp_path),
+                     '--plot']) == 0
+    summary = json.loads(out.getvalue())
+    assert summary['collisions'] == 1 and summary['crossings'] == 1 and summary['feed_rate_hz'] == 1 / 0.05
+    assert [part['final_mode'] for part in summary['parts']] == ['stuck', 'stuck']
+    assert summary['parts'][0]['distance_m'] == pytest.approx(2e-4, abs=1e-9)
+    assert summary['parts'][0]['transitions']['slip_to_stick'] == 1
+    assert (tmp_path / 'simulate.png').stat().st_size > 0 and (tmp_path / 'simulate.csv').read_text().startswith(
+        't,x_0,mode_0,x_1,mode_1')
