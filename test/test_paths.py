@@ -27,7 +27,7 @@ import os
 
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import HealthCheck, assume, event, given, settings
 from hypothesis import strategies as st
 
 from micro_feeder.explore.evaluate import regime
@@ -122,6 +122,13 @@ def _stepped(flat: dict[str, object], duration: float, max_points: int = MAX_POI
              window: float = WINDOW) -> tuple[float, dict[str, int], str]:
     """The Stepper in ticks, fed the bytes the actuator publishes (``max_points`` and ``window``: its
     ``stream.*`` parameters), as the simulator node applies them."""
+    stepper = _stepped_run(flat, duration, max_points, window)
+    return stepper.state.distance, stepper.state.transitions, stepper.state.mode
+
+
+def _stepped_run(flat: dict[str, object], duration: float, max_points: int = MAX_POINTS,
+                 window: float = WINDOW) -> Stepper:
+    """:func:`_stepped`'s Stepper at the end of the run."""
     stepper = Stepper(build_model(flat))
     params = StrokeParams.from_flat(flat)
     n = stepper.model.n_actuators
@@ -141,8 +148,8 @@ def _stepped(flat: dict[str, object], duration: float, max_points: int = MAX_POI
             data = trajectory_cdr.encode(names, offsets_ns, knots[0], knots[1], knots[2],
                                          stamps.to_time(stamp_ns * 1e-9))
             stepper.command_trajectory(parse_trajectory_cdr(data, names, stepper.limits))
-        stepper.advance(i * TICK)
-    return stepper.state.distance, stepper.state.transitions, stepper.state.mode
+        stepper.advance_parts(i * TICK)
+    return stepper
 
 
 def _same_distance(a: float, b: float, allowance: float = 0.0) -> bool:
@@ -163,6 +170,18 @@ def _knot_error(flat: dict[str, object]) -> float:
     return float(np.max(np.abs(knots - exact)) / max(np.max(np.abs(exact)), 1e-300))
 
 
+def _stroke_changes(flat: dict[str, object]) -> list[dict[str, object]]:
+    """Changes of the strokes as small as the knots' own error (:func:`_conditioning`)."""
+    params = StrokeParams.from_flat(flat)
+    eps = _knot_error(flat)
+    shift = eps / (2.0 * math.pi)                  # in stroke periods: ε/ω seconds
+    phases = list(params.phases)
+    changes: list[dict[str, object]] = [{'stroke.amplitude': params.amplitude * f} for f in (1 - eps, 1 + eps)]
+    if len(phases) > 1:
+        changes += [{'stroke.phases': [p + shift * (k % 2 == odd) for k, p in enumerate(phases)]} for odd in (0, 1)]
+    return changes
+
+
 def _conditioning(flat: dict[str, object], duration: float, offline: tuple) -> tuple[bool, float]:
     """How the scenario answers a change of the strokes as small as the knots' own error ε (relative s̈,
     :func:`_knot_error`): (whether the transition counts and final mode survive it, 2x the distance it
@@ -176,15 +195,8 @@ def _conditioning(flat: dict[str, object], duration: float, offline: tuple) -> t
     take-off threshold is crossed). The first alone missed scenarios whose take-off time, set by the
     actuators' relative timing, moved the part 2-3x more under the knots (1.3e-9 and 1.5e-9 m; the
     amplitude probe 4.5e-10 and 7e-10 m). (A common shift of all actuators is a mere time translation.)"""
-    params = StrokeParams.from_flat(flat)
-    eps = _knot_error(flat)
-    shift = eps / (2.0 * math.pi)                  # in stroke periods: ε/ω seconds
-    phases = list(params.phases)
-    changes = [{'stroke.amplitude': params.amplitude * factor} for factor in (1 - eps, 1 + eps)]
-    if len(phases) > 1:
-        changes += [{'stroke.phases': [p + shift * (k % 2 == odd) for k, p in enumerate(phases)]} for odd in (0, 1)]
     allowance, stable = 0.0, True
-    for change in changes:
+    for change in _stroke_changes(flat):
         changed = _offline({**flat, **change}, duration)
         stable &= changed[1:] == offline[1:]
         allowance = max(allowance, 2.0 * abs(changed[0] - offline[0]))
@@ -358,3 +370,52 @@ def track_scenarios(draw: st.DrawFn) -> dict[str, object]:
 def test_every_path_moves_a_part_on_a_track_the_same(scenario: dict[str, object]) -> None:
     """simulate, the stepped simulator fed the actuator's bytes, and sweep agree on drawn track scenarios."""
     _check_paths(scenario)
+
+
+PARTS_EXAMPLES = int(os.environ.get('MF_PARTS_PATH_EXAMPLES', '30'))   # in make test (not marked paths)
+
+
+@st.composite
+def parts_scenarios(draw: st.DrawFn) -> dict[str, object]:
+    """Several parts (issue 28) on a vibratory track or the bump surface, spaced at random (some touching),
+    with initial velocities and a restitution between them."""
+    n = draw(st.integers(2, 5))
+    size = draw(st.floats(50e-6, 150e-6))
+    gaps = [draw(st.sampled_from([0.0, draw(st.floats(0.0, 400e-6))])) for _ in range(n - 1)]
+    x0 = [draw(st.floats(-1.0e-3, 0.0))]
+    for gap in gaps:
+        x0.append(x0[-1] + size + gap)
+    parts = {'particle.x0': x0, 'particle.size': size, 'particle.restitution': draw(st.floats(0.0, 1.0)),
+             'particle.v0': [draw(st.sampled_from([0.0, draw(st.floats(-0.05, 0.05))])) for _ in range(n)]}
+    if draw(st.booleans()):
+        return {**draw(track_scenarios()), **parts}
+    return {**draw(scenarios()), 'piezo.enabled': False, **parts}
+
+
+@settings(max_examples=PARTS_EXAMPLES, derandomize=True, deadline=None, database=None,
+          suppress_health_check=HEALTH)
+@given(scenario=parts_scenarios())
+def test_every_path_moves_many_parts_the_same(scenario: dict[str, object]) -> None:
+    """Several parts: offline (``PartsModel.run``, what ``simulate`` integrates) and the simulator's Stepper in
+    ticks fed the actuator's bytes give every part the same transitions and final mode, the same number of
+    impacts, and positions within 1e-9 m or 1e-6 relative (or the scenario's own sensitivity, as for one part)."""
+    from micro_feeder.physics.parts import PartsModel
+
+    flat = _settings(scenario)
+    duration = _duration(flat)
+
+    def outcome(changes: dict[str, object]) -> tuple[np.ndarray, list]:
+        state = PartsModel(build_model({**flat, **changes})).run(duration).state
+        return state.positions, [state.collisions] + [(p.transitions, p.mode) for p in state.parts]
+
+    positions, counts = outcome({})
+    event('impacts: ' + ('none' if counts[0] == 0 else '1-9' if counts[0] < 10 else '10 or more'))
+    allowance = np.zeros(positions.size)
+    for change in _stroke_changes(flat):                 # as for one part: no path's answer on a knife's edge
+        changed_positions, changed_counts = outcome(change)
+        assume(changed_counts == counts)
+        allowance = np.maximum(allowance, 2.0 * np.abs(changed_positions - positions))
+    stepped = _stepped_run(flat, duration).parts_state
+    assert [stepped.collisions] + [(p.transitions, p.mode) for p in stepped.parts] == counts, (scenario, counts)
+    for i, (x, y) in enumerate(zip(positions, stepped.positions, strict=True)):
+        assert _same_distance(x, y, allowance[i]), (scenario, i, x, y, allowance[i])

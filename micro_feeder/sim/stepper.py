@@ -1,10 +1,10 @@
 """The simulator's physics side without ROS: model, state, stroke schedule and the commands applied to it.
 
-:class:`Stepper` owns a :class:`FeederModel`, its :class:`FeederState` and the :class:`StrokeSchedule` that
-commands edit. The simulator node calls :meth:`Stepper.advance` every tick and applies commands as they
-arrive; an offline script can drive the very same object to predict what the node publishes.
-Everything is a pure function of the parameters and of the (time, command) sequence, which makes a
-stepped run repeatable bit for bit.
+:class:`Stepper` owns a :class:`FeederModel`, the parts' states (one :class:`FeederState` each; several parts
+meet through :class:`PartsModel`, docs/parts.md) and the :class:`StrokeSchedule` that commands edit. The
+simulator node calls :meth:`Stepper.advance_parts` every tick and applies commands as they arrive; an offline
+script can drive the very same object to predict what the node publishes. Everything is a pure function of
+the parameters and of the (time, command) sequence, which makes a stepped run repeatable bit for bit.
 """
 
 from __future__ import annotations
@@ -17,8 +17,9 @@ from typing import Any
 import numpy as np
 
 from ..physics.contact import ContactLaw, ContactParams, contact_law
-from ..physics.dynamics import EventList, FeederModel, Observation
+from ..physics.dynamics import EventList, FeederModel, FeederState, Observation
 from ..physics.particle import ParticleParams
+from ..physics.parts import PartsModel, PartsState
 from ..physics.trajectory import CommandLimits, check_table
 from ..physics.waveforms import StrokeSchedule, trajectory_table
 from .commands import CommandRejected, TrajectoryCommand, start_time
@@ -45,8 +46,9 @@ def build_model(flat: Mapping[str, Any]) -> FeederModel:
 class Stepper:
     """Model + state + stroke schedule, driven to successive sim times.
 
-    Starts (and :meth:`reset` restarts) at t = 0 with the part stuck at ``particle.x0`` and every stroke
-    held at 0: the strokes only move when a command arrives.
+    Starts (and :meth:`reset` restarts) at t = 0 with every part at its ``particle.x0`` (with its
+    ``particle.v0``) and every stroke held at 0: the strokes only move when a command arrives. One part is
+    integrated by the model alone; several by :class:`PartsModel`, which adds their impacts.
     """
 
     def __init__(self, model: FeederModel):
@@ -60,22 +62,33 @@ class Stepper:
         or compile (seconds with a cold numba cache, 10-40 ms warm) happens here and not under the simulator's
         lock inside the first tick or the first command: the kernel, and a quintic trajectory command
         (Hermite coefficients, its check against the piezo limits, its evaluation)."""
-        state = self.state.copy()
-        self.model.advance(state, 1e-6, self.schedule)
-        self.model.observe(state, self.schedule)
+        parts = self.parts_state.copy()
+        self._advance(parts, 1e-6, self.schedule)
+        self.model.observe(parts.parts[0], self.schedule)
         n = self.model.n_actuators
         schedule = StrokeSchedule.of_pieces(self.schedule.pieces)
         knots = np.zeros((3, n))
         table = schedule.command_trajectory(1e-6, [2e-6, 3e-6, 4e-6], knots, knots, knots)
         check_table(table, CommandLimits(*self.limits))
-        self.model.advance(state, 5e-6, schedule)
+        self._advance(parts, 5e-6, schedule)
 
     def reset(self, model: FeederModel | None = None) -> None:
         """Back to t = 0 (with ``model`` instead of the current one when given)."""
         if model is not None:
             self.model = model
-        self.state = self.model.initial_state()
+        self.parts = PartsModel(self.model) if self.model.particle.n_parts > 1 else None
+        self.parts_state = self.parts.initial_state() if self.parts is not None else \
+            PartsState([self.model.initial_state()])
         self.schedule = StrokeSchedule(trajectory_table([0.0], np.zeros((1, self.model.n_actuators))))
+
+    @property
+    def state(self) -> FeederState:
+        """Part 0's state (the one part's, with one): its time is every part's."""
+        return self.parts_state.parts[0]
+
+    @property
+    def n_parts(self) -> int:
+        return len(self.parts_state.parts)
 
     @property
     def t(self) -> float:
@@ -88,11 +101,26 @@ class Stepper:
         return self.model.piezo.stroke_min, self.model.piezo.stroke_max
 
     def advance(self, t_target: float) -> EventList:
-        """Integrate to ``t_target`` (s); returns the mode changes. Raises ``SimulationError``."""
-        return self.model.advance(self.state, t_target, self.schedule)
+        """Integrate to ``t_target`` (s); returns part 0's mode changes (:meth:`advance_parts`: every part's).
+        Raises ``SimulationError``."""
+        return self.advance_parts(t_target)[0]
+
+    def advance_parts(self, t_target: float) -> list[EventList]:
+        """Integrate every part to ``t_target`` (s), impacts included; returns each part's mode changes."""
+        return self._advance(self.parts_state, t_target, self.schedule)
+
+    def _advance(self, parts: PartsState, t_target: float, schedule: StrokeSchedule) -> list[EventList]:
+        if self.parts is None:
+            return [self.model.advance(parts.parts[0], t_target, schedule)]
+        return self.parts.advance(parts, t_target, schedule)
 
     def observe(self) -> Observation:
+        """Part 0's outputs now (docs/dynamics.md §4)."""
         return self.model.observe(self.state, self.schedule)
+
+    def observe_parts(self) -> list[Observation]:
+        """Every part's outputs now, in part order."""
+        return [self.model.observe(part, self.schedule) for part in self.parts_state.parts]
 
     def command_trajectory(self, cmd: TrajectoryCommand) -> float:
         """Apply a checked trajectory: it replaces the schedule from its start time on (the stamp, or now

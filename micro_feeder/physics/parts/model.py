@@ -18,6 +18,7 @@ SI units.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
@@ -153,8 +154,9 @@ class PartsModel:
         events: list[list[EventList]] = [[] for _ in state.parts]
         self._cascade(state, range(len(state.parts) - 1), True, source, events)     # e.g. a v0 into a touching part
         while state.t < t_target:
-            chunk = min(state.chunk_hint or self.near_chunk, t_target - state.t)
-            self._chunk(state, state.t + chunk, source, events)
+            hint = state.chunk_hint or self.near_chunk
+            t1 = self._near_end(state.t) if hint <= self.near_chunk else state.t + hint
+            self._chunk(state, min(t1, t_target), source, events)
         return [EventList.concatenate(part_events) for part_events in events]
 
     def run(self, duration: float | None = None, source: Source = None, output_step: float | None = None
@@ -216,7 +218,7 @@ class PartsModel:
             crossed = (gap1 < 0.0) & ~touching
             if pending >= 0:
                 crossed[pending] = False
-            pressed = (gap1 < 0.0) & (gap1 < gap0) & touching
+            pressed = (gap1 < -CONTACT_GAP) & (gap1 < gap0) & touching     # not an overlap within rounding
             near = (reach > 0.0) & (gap0 <= reach)
             if pending >= 0:
                 near[pending] = False
@@ -227,9 +229,10 @@ class PartsModel:
                     t_first = t0 + self.event_tolerance
                 t1, pending = t_first, pair
                 continue
-            if (near.any() or pressed.any()) and chunk > self.near_chunk * (1 + 1e-12):
+            if (near.any() or pressed.any()) and t1 > self._near_end(t0) * (1 + 1e-15):
                 ratio = float(np.min(gap0[near] / reach[near])) if near.any() else 0.0
-                t1, pending = t0 + max(self.near_chunk, 0.5 * ratio * chunk), -1
+                cut = 0.5 * ratio * chunk
+                t1, pending = (t0 + cut if cut > self.near_chunk else self._near_end(t0)), -1
                 continue
             break
         state.parts = trial.parts
@@ -247,6 +250,12 @@ class PartsModel:
         self._cascade(state, sorted(set(arrived)), True, source, events)
         self._cascade(state, np.flatnonzero(touching), False, source, events)
         state.chunk_hint = self._next_chunk(state, chunk, gap1, reach, near | pressed)
+
+    def _near_end(self, t0: float) -> float:
+        """The end (s) of a near chunk starting at ``t0``: the next multiple of ``integration.dt``, so that a train
+        is stepped at the same instants whichever calls (ticks, one run) a path advances by, as long as they end
+        on that grid too (a 1 ms tick is 10 chunks of the default 0.1 ms)."""
+        return (math.floor(t0 / self.near_chunk + 1e-9) + 1) * self.near_chunk
 
     def _next_chunk(self, state: PartsState, chunk: float, gaps: np.ndarray, reach: np.ndarray,
                     near: np.ndarray) -> float:
