@@ -75,15 +75,17 @@ class SerializedTemplate:
     template, so no offset is computed by hand.
     """
 
-    def __init__(self, msg: object, stamp: Time, runs: Sequence[tuple[Callable[[list[float]], None], int]]):
-        stamp.sec, stamp.nanosec = STAMP_SENTINEL
+    def __init__(self, msg: object, stamp: Time | None,
+                 runs: Sequence[tuple[Callable[[list[float]], None], int]]):
+        if stamp is not None:           # None: a message without a stamp
+            stamp.sec, stamp.nanosec = STAMP_SENTINEL
         first = 0
         for setter, length in runs:
             setter([_sentinel(first + i) for i in range(length)])
             first += length
         template = wire.serialize(msg)
         self._buffer = bytearray(template)
-        self._stamps_at = _offsets(template, STAMP.pack(*STAMP_SENTINEL))
+        self._stamps_at = _offsets(template, STAMP.pack(*STAMP_SENTINEL)) if stamp is not None else []
         self._runs: list[tuple[int, struct.Struct]] = []
         first = 0
         for _, length in runs:

@@ -27,28 +27,32 @@ class TransitionEncoder:
 
     Each event is one status named ``{source}: transition``: level OK, ``message`` = the kind, hardware id
     ``micro_feeder``, key/values ``kind``, ``from``, ``to``, ``t_s`` (exact sim time, repr of the float) and
-    ``x_m`` (position, m); ``header.stamp`` = the sim time rounded to the nanosecond, frame ``feeder``.
-    Everything from the frame to the key ``t_s`` depends only on (kind, from, to): it is kept per triple.
+    ``x_m`` (position, m), and with several parts ``part`` (its index, in order along the feeder);
+    ``header.stamp`` = the sim time rounded to the nanosecond, frame ``feeder``. Everything from the frame to
+    the key ``t_s`` depends only on (kind, from, to, whether a part is named): it is kept per such key.
     """
 
     def __init__(self, source: str):
         self._source = source
-        self._middles: dict[tuple[str, str, str], bytes] = {}
+        self._middles: dict[tuple[str, str, str, bool], bytes] = {}
 
-    def encode(self, event: Event) -> bytes:
-        """``event`` as the CDR bytes of its DiagnosticArray."""
-        modes = (event.kind, event.from_mode, event.to_mode)
-        middle = self._middles.get(modes)
+    def encode(self, event: Event, part: int | None = None) -> bytes:
+        """``event`` (of part ``part``, when given) as the CDR bytes of its DiagnosticArray."""
+        key = (event.kind, event.from_mode, event.to_mode, part is not None)
+        middle = self._middles.get(key)
         if middle is None:
-            middle = self._middles[modes] = self._middle(*modes)
+            middle = self._middles[key] = self._middle(*key)
         payload = bytearray(STAMP.pack(*stamp_parts(event.t)))
         payload += middle
         put_string(payload, repr(event.t))
         put_string(payload, 'x_m')
         put_string(payload, repr(event.x))
+        if part is not None:
+            put_string(payload, 'part')
+            put_string(payload, str(part))
         return ENCAPSULATION + payload
 
-    def _middle(self, kind: str, from_mode: str, to_mode: str) -> bytes:
+    def _middle(self, kind: str, from_mode: str, to_mode: str, with_part: bool = False) -> bytes:
         """The payload after the stamp (which is 8 bytes, so alignment carries over) up to the key ``t_s``."""
         payload = bytearray(STAMP.size)
         put_string(payload, FEEDER_FRAME)
@@ -56,7 +60,7 @@ class TransitionEncoder:
         payload += DiagnosticStatus.OK                              # level: one byte
         for text in (f'{self._source}: transition', kind, 'micro_feeder'):   # name, message, hardware id
             put_string(payload, text)
-        put_uint32(payload, 5)                                      # key/values
+        put_uint32(payload, 6 if with_part else 5)                  # key/values
         for key, value in (('kind', kind), ('from', from_mode), ('to', to_mode)):
             put_string(payload, key)
             put_string(payload, value)

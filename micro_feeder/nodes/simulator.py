@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
+from geometry_msgs.msg import PoseArray, PoseStamped, TwistStamped, WrenchStamped
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterEvent, SetParametersResult
 from rclpy.clock import Clock, ClockType
@@ -48,6 +48,7 @@ from visualization_msgs.msg import MarkerArray
 
 from ..interface import messages, stamps, wire
 from ..interface.names import joint_names, receipt_frame
+from ..interface.parts_messages import PartsMessages
 from ..interface.transitions import TransitionEncoder
 from ..physics.dynamics import Event, SimulationError
 from ..physics.parameters import ParameterError, ParamSpec
@@ -163,6 +164,9 @@ class Simulator(Node):
         self._pub_mode = self._publisher(String, 'particle/contact_state')
         self._pub_transitions = self._publisher(DiagnosticArray, 'particle/transitions')
         self._pub_markers = self._publisher(MarkerArray, 'surface/markers')
+        self._pub_part_poses = self._publisher(PoseArray, 'particles/poses')
+        self._pub_part_states = self._publisher(Float64MultiArray, 'particles/states')
+        self._pub_part_transitions = self._publisher(DiagnosticArray, 'particles/transitions')
         self._pub_clock = self._publisher(ClockMsg, '/clock') if p['publish_clock'] else None
         self._pub_diag = self._publisher(DiagnosticArray, '/diagnostics')
         self._pub_parameters = self._publisher(ParameterEvent, 'simulator/parameters', '~/parameters')
@@ -303,7 +307,8 @@ class Simulator(Node):
         recorder that has not yet matched a topic would miss its first messages)."""
         return all(pub.get_subscription_count() > 0 for pub in
                    (self._pub_pose, self._pub_twist, self._pub_wrench, self._pub_joints, self._pub_mode,
-                    self._pub_transitions, self._pub_markers, self._pub_parameters, self._pub_receipts))
+                    self._pub_transitions, self._pub_markers, self._pub_parameters, self._pub_receipts,
+                    self._pub_part_poses, self._pub_part_states, self._pub_part_transitions))
 
     def destroy_node(self) -> None:
         """Stop the loop and intake threads (waiting up to :data:`STOP_TIMEOUT` each for work in
@@ -357,7 +362,7 @@ class Simulator(Node):
         """Advance to ``t_target`` (never past :meth:`stop_at`'s end) and publish; on a simulation failure
         pause and report it."""
         try:
-            events = self._stepper.advance(min(t_target, self._t_end))
+            events = self._stepper.advance_parts(min(t_target, self._t_end))
         except SimulationError as err:
             self._fail(str(err))
             return
@@ -379,9 +384,20 @@ class Simulator(Node):
         self.get_logger().error(f'simulation stopped (paused; call ~/reset): {error}')
         self._publish_diagnostics()
 
-    def _publish_state(self, events: Sequence[Event]) -> None:
+    def _publish_state(self, events: Sequence[Sequence[Event]]) -> None:
+        """Publish the state now, with ``events`` (each part's mode changes since the last time)."""
         self.states_published += 1
-        obs = self._stepper.observe()
+        observations = self._stepper.observe_parts()
+        obs = observations[0]
+        parts = self._parts_messages
+        parts.update(observations)
+        self._pub_part_poses.publish(parts.poses)
+        self._pub_part_states.publish(parts.states)
+        for part, part_events in enumerate(events):
+            for event in part_events:
+                if event.kind != 'reversal':
+                    self._pub_part_transitions.publish(self._transitions.encode(event, part))
+        events = events[0] if events else []
         state = self._state_messages
         stamp = state.update(obs, obs.stroke_velocities)
         self._pub_pose.publish(state.pose)
@@ -408,6 +424,7 @@ class Simulator(Node):
     def _configure_outputs(self) -> None:
         """Per-model output buffers: the state messages (one joint per actuator) and the surface markers."""
         self._state_messages = messages.StateMessages(self.joints)
+        self._parts_messages = PartsMessages(self._stepper.n_parts)
         surface = self._stepper.model.surface
         c, w = np.asarray(surface.centers), np.asarray(surface.widths)
         xs = np.linspace(float(np.min(c - 4 * w)), float(np.max(c + 4 * w)), MARKER_POINTS)

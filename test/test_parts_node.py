@@ -1,0 +1,65 @@
+"""Several parts on the ROS interface (issue 28): the simulator node in-process with real rclpy, an outside
+probe subscribed to every topic of the contract with its documented QoS, bounded waits."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+from rclpy.context import Context
+from test_simulator_node import STEP, Rig, burst_message
+
+from micro_feeder.interface.parts_messages import MODE_CODES, PART_STATE_FIELDS
+from micro_feeder.settings import load_settings
+from micro_feeder.sim.commands import parse_trajectory
+from micro_feeder.sim.stepper import Stepper, build_model
+
+X0 = [0.2e-3, 0.3e-3 + 1e-7, 0.6e-3]       # m: the bump at 0 pulls the parts in at different speeds: they meet
+PARTS = {'particle.x0': X0, 'particle.size': 100e-6, 'particle.restitution': 0.5}
+
+
+@pytest.fixture
+def parts_rig(ros_context: Context) -> Iterator[Rig]:
+    rig = Rig(ros_context, start_paused=True, step_period=STEP, **PARTS)
+    yield rig
+    rig.close()
+
+
+def test_every_part_is_published_in_order_as_the_stepper_computes_it(parts_rig: Rig) -> None:
+    """``particles/poses`` holds every part in order, ``particles/states`` their modes and velocities, part 0
+    is also ``particle/pose``, and each part's transitions come on ``particles/transitions`` with its index:
+    all as the Stepper computes them fed the same command at the same tick."""
+    rig = parts_rig
+    msg = burst_message(stamp=0.002)
+    rig.wait(lambda: rig.probe.msgs['particle/contact_state'], 'latched initial contact state')
+    rig.step(1)
+    rig.send_trajectory(msg)
+    n_steps = 12
+    rig.step(n_steps - 1)
+    assert rig.sim.rejected == 0
+
+    stepper = Stepper(build_model({**load_settings(), **PARTS}))
+    events: list[list] = [[] for _ in X0]
+    for i in range(n_steps):
+        if i == 1:
+            stepper.command_trajectory(parse_trajectory(msg, ['piezo_0'], stepper.limits))
+        for part, part_events in enumerate(stepper.advance_parts(stepper.t + STEP)):
+            events[part] += [e for e in part_events if e.kind != 'reversal']
+    assert stepper.parts_state.collisions >= 1, 'the scenario must have the parts meet'
+
+    poses = rig.probe.msgs['particles/poses'][-1]
+    assert poses.header.frame_id == 'feeder' and len(poses.poses) == len(X0)
+    np.testing.assert_array_equal([p.position.x for p in poses.poses], stepper.parts_state.positions)
+    assert rig.probe.msgs['particle/pose'][-1].pose.position.x == poses.poses[0].position.x
+    states = rig.probe.msgs['particles/states'][-1]
+    assert [d.label for d in states.layout.dim] == ['part', ','.join(PART_STATE_FIELDS)]
+    table = np.asarray(states.data).reshape(len(X0), len(PART_STATE_FIELDS))
+    np.testing.assert_array_equal(table[:, PART_STATE_FIELDS.index('xdot')], stepper.parts_state.velocities)
+    assert table[:, 1].tolist() == [MODE_CODES[p.mode] for p in stepper.parts_state.parts]
+    assert np.all(table[:, 0] == stepper.t)
+
+    published = [(int(kv['part']), kv['kind'], float(kv['t_s'])) for kv in
+                 ({v.key: v.value for v in m.status[0].values} for m in rig.probe.msgs['particles/transitions'])]
+    expected = [(part, e.kind, e.t) for part, part_events in enumerate(events) for e in part_events]
+    assert sorted(published) == sorted(expected) and len({p for p, _, _ in expected}) >= 2
