@@ -3,7 +3,8 @@
 ``resim`` answers "does the log's part trajectory follow from its commands?": it rebuilds the simulation
 from the parameters the simulator recorded, stops it at the sim times the simulator stopped at, applies
 each recorded command at the sim time the simulator received it, and compares the re-simulated part
-position (x, z) with every recorded ``particle/pose``.
+position (x, z) with every recorded ``particle/pose``, and with several parts every part's with the
+``particles/poses`` of the same stamp.
 
 The log is read and replayed by :mod:`.replay` (what it reads, the stop times, the receipts), the same
 loop calibration fits with. In real time the simulator's stops are known to 1 ns only: between commands
@@ -15,8 +16,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
+
+import numpy as np
 
 from ..interface.names import TRANSITION_KINDS
 from ..interface.transitions import status_messages
@@ -63,6 +66,7 @@ class ResimReport:
     exact_stop_times: bool
     receipts: str              # 'recorded' or 'estimated'
     notes: list[str] = field(default_factory=list)
+    parts: int = 1             # parts compared at each pose (particles/poses, with several)
     transitions: dict[str, int] = field(default_factory=dict)   # re-simulated, up to the last compared pose
     recorded_transitions: dict[str, int] | None = None          # particle/transitions up to then (None: not logged)
 
@@ -76,7 +80,8 @@ class ResimReport:
     def verdict(self) -> str:
         """One line for people."""
         total = self.commands_applied + self.commands_rejected
-        what = (f'{self.poses} poses, {self.sim_time:.6f} s sim time, {total} command{"s" * (total != 1)}'
+        what = (f'{self.poses} poses' + (f' of {self.parts} parts' if self.parts > 1 else '')
+                + f', {self.sim_time:.6f} s sim time, {total} command{"s" * (total != 1)}'
                 + (f' ({self.commands_rejected} refused, as by the simulator)' if self.commands_rejected else '')
                 + f'; {self.mode} run' + (f', changed: {", ".join(sorted(self.overrides))}' if self.overrides else ''))
         if self.recorded_transitions is not None:
@@ -140,8 +145,19 @@ def resimulate(log: LogReader, overrides: Mapping[str, Any] | None = None, *,
         else:
             report.commands_rejected += 1
 
-    failure = replay(stepper, recording, lambda stop, obs: _compare(obs, stop, report), on_command=count,
-                     progress=progress)
+    part_poses = _recorded_part_poses(log) if stepper.n_parts > 1 else None
+    if stepper.n_parts > 1 and part_poses is None:
+        notes.append(f'the log has no particles/poses: only part 0 of {stepper.n_parts} compared')
+    report.parts = stepper.n_parts if part_poses is not None else 1
+
+    def compare(stop: Stop, obs: Observation) -> None:
+        _compare(obs, stop, report)
+        recorded = part_poses.get(stop.ns) if part_poses is not None else None
+        if recorded is not None:
+            for part, (x, z) in zip(stepper.observe_parts(), recorded, strict=True):
+                _compare(part, replace(stop, pose=(x, z)), report, count=False)
+
+    failure = replay(stepper, recording, compare, on_command=count, progress=progress)
     if failure is not None:
         notes.append(f'the re-simulation failed at t = {stepper.t:.6f} s: {failure}; compared up to there')
     report.exact_stop_times = recording.exact
@@ -172,11 +188,21 @@ def _recorded_transitions(log: LogReader, until_ns: int) -> dict[str, int] | Non
     return counts
 
 
-def _compare(obs: Observation, stop: Stop, report: ResimReport) -> None:
+def _recorded_part_poses(log: LogReader) -> dict[int, np.ndarray] | None:
+    """Every ``particles/poses`` message: stamp (ns, sim time) -> (parts, 2) array of (x, z) (m); None when the
+    log does not have the topic."""
+    if log.resolve('particles/poses') is None:
+        return None
+    return {m.stamp_ns: np.array([(p.position.x, p.position.z) for p in m.message.poses])
+            for m in log.messages(['particles/poses'], decoded=True) if m.stamp_ns is not None}
+
+
+def _compare(obs: Observation, stop: Stop, report: ResimReport, count: bool = True) -> None:
     x, z = stop.pose
     dx, dz = abs(obs.x - x), abs(obs.z - z)
     error = math.hypot(dx, dz)
-    report.poses += 1
+    if count:
+        report.poses += 1
     report.sim_time = stop.ns / 1e9
     report.max_dx, report.max_dz = max(report.max_dx, dx), max(report.max_dz, dz)
     if error > report.max_error or math.isnan(error):
