@@ -23,7 +23,8 @@ from micro_feeder.viz.viewer import Viewer, ViewerError
 
 CLIENT_DIR = Path(__file__).parent / 'foxglove_client'
 MICRO_FEEDER = str(Path(sys.executable).parent / 'micro-feeder')
-SUBSCRIBED = ('/particle/pose', '/foxglove/scene', '/foxglove/friction_limit')
+SUBSCRIBED = ('/particle/pose', '/foxglove/scene', '/foxglove/friction_limit', '/particles/poses')
+PARTS_X0 = '[0.5e-3,1.5e-3,2.5e-3]'     # m: part 0 where the single part starts by default, two more far off
 FORWARDED = re.compile(r'(\d+) (/\S+?)(?:,|$)')
 
 
@@ -72,11 +73,11 @@ def listening_addresses(port: int) -> set[str]:
 def test_a_foxglove_client_decodes_pose_scene_and_sim_time() -> None:
     """5 s of a real client subscribed to the pose, the scene and the friction limit: at least 95 % of what
     the server sent decoded, the scene's part where the pose says, coloured by its mode, Q_max right, and
-    sim time advancing."""
+    sim time advancing; with three parts, the other two drawn where ``particles/poses`` says."""
     if not (CLIENT_DIR / 'node_modules' / '@foxglove' / 'ws-protocol').is_dir():
         pytest.fail('the test client is not installed: run "make test" (npm ci in test/foxglove_client)')
     port = free_port()
-    run = start_run('--duration', '9', '--foxglove', f'127.0.0.1:{port}')
+    run = start_run('--duration', '9', '--foxglove', f'127.0.0.1:{port}', '--set', f'particle.x0={PARTS_X0}')
     try:
         wait_listening(run)
         client = subprocess.run([shutil.which('node') or 'node', str(CLIENT_DIR / 'client.js'),
@@ -99,7 +100,13 @@ def test_a_foxglove_client_decodes_pose_scene_and_sim_time() -> None:
         assert stats['decoded'] == stats['received'] >= 0.95 * sent[topic], (topic, stats, sent)
     last_pose, last_scene = pose['last'], scene['last']
     assert last_pose['frame_id'] == 'feeder'
-    assert last_scene['entities'] == ['surface', 'actuators', 'part'] and set(last_scene['frames']) == {'feeder'}
+    assert last_scene['entities'] == ['surface', 'actuators', 'part', 'other_parts']
+    assert set(last_scene['frames']) == {'feeder'}
+    parts = report['topics']['/particles/poses']['last']
+    assert parts['frame_id'] == 'feeder' and len(parts['xs']) == 3 and parts['xs'][0] == last_pose['x']
+    assert [o['x'] for o in last_scene['other_parts']] == pytest.approx(parts['xs'][1:], abs=1e-12)
+    assert [o['z'] for o in last_scene['other_parts']] == pytest.approx(
+        [z + PART_SIZE / 2 for z in parts['zs'][1:]], abs=1e-12)
     assert last_scene['surface_points'] == 200 and last_scene['actuators'] == 1
     part = last_scene['part']      # the burst is over after 0.1 s: the part rests where the pose says
     assert part['x'] == pytest.approx(last_pose['x'], abs=1e-12)

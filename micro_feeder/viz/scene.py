@@ -73,9 +73,10 @@ class FeederScene:
                               float(np.max(self.centers + 4 * self.widths)), SURFACE_POINTS)
 
     def update(self, t_ns: int, strokes: Sequence[float], x: float, z: float, theta: float,
-               mode: str) -> SceneUpdate:
+               mode: str, others: Sequence[tuple[float, float, str]] = ()) -> SceneUpdate:
         """The scene at sim time ``t_ns`` (ns): actuator ``strokes`` (m), the part at (``x``, ``z``) (m) on a
-        surface tilted by ``theta`` = atan(h_x) (rad), in contact ``mode``."""
+        surface tilted by ``theta`` = atan(h_x) (rad), in contact ``mode``; with several parts, the ``others``
+        (parts 1, 2, …) as (x, z, mode), each a sphere coloured by its mode and labelled with its index."""
         strokes = np.asarray(strokes, dtype=float)
         if strokes.shape != self.centers.shape:
             raise ValueError(f'{strokes.size} strokes for {self.centers.size} actuators')
@@ -88,7 +89,8 @@ class FeederScene:
         surface = SceneEntity(timestamp=stamp, frame_id=FEEDER_FRAME, id='surface', lines=[LinePrimitive(
             thickness=3.0, scale_invariant=True, color=_color((0.55, 0.6, 0.75)),
             points=[Point3(x=float(px), y=0.0, z=float(pz)) for px, pz in zip(xs, heights, strict=True)])])
-        return SceneUpdate(entities=[surface, self._actuators(stamp, strokes), self._part(stamp, x, z, theta, mode)])
+        return SceneUpdate(entities=[surface, self._actuators(stamp, strokes), self._part(stamp, x, z, theta, mode),
+                                     self._others(stamp, others)])
 
     def transforms(self, t_ns: int, x: float, z: float, theta: float) -> FrameTransforms:
         """``contact`` in ``feeder``: at the part, rotated by −θ about y (docs/interface.md, *Frames*)."""
@@ -110,6 +112,18 @@ class FeederScene:
                 billboard=True, font_size=13.0, scale_invariant=True, color=_color((0.85, 0.85, 0.9)),
                 text=f'piezo_{k} {s * 1e6:+.1f} µm'))
         return SceneEntity(timestamp=stamp, frame_id=FEEDER_FRAME, id='actuators', cubes=cubes, texts=texts)
+
+    def _others(self, stamp: Timestamp, others: Sequence[tuple[float, float, str]]) -> SceneEntity:
+        r = self.part_size / 2.0
+        spheres, texts = [], []
+        for index, (x, z, mode) in enumerate(others, start=1):
+            rgb = MODE_COLORS.get(mode, UNKNOWN_MODE_COLOR)
+            spheres.append(SpherePrimitive(pose=Pose(position=Vector3(x=x, y=0.0, z=z + r), orientation=_about_y(0.0)),
+                                           size=Vector3(x=2 * r, y=2 * r, z=2 * r), color=_color(rgb)))
+            texts.append(TextPrimitive(pose=Pose(position=Vector3(x=x, y=0.0, z=z + 3 * r), orientation=_about_y(0.0)),
+                                       billboard=True, font_size=12.0, scale_invariant=True, color=_color(rgb),
+                                       text=str(index)))
+        return SceneEntity(timestamp=stamp, frame_id=FEEDER_FRAME, id='other_parts', spheres=spheres, texts=texts)
 
     def _part(self, stamp: Timestamp, x: float, z: float, theta: float, mode: str) -> SceneEntity:
         r = self.part_size / 2.0

@@ -42,6 +42,7 @@ from ..interface import stamps, wire
 from ..interface.stamps import header_stamp_ns
 from ..logs.schemas import schema_text
 from ..logs.sim_parameters import parameter_value
+from ..physics.dynamics import MODES
 from ..physics.surface import TrackParams
 from .endpoint import Endpoint
 from .scene import PART_SIZE, FeederScene
@@ -49,7 +50,8 @@ from .scene import PART_SIZE, FeederScene
 STATE_RATE = 200.0      # Hz (wall): most messages per second forwarded on each per-tick state topic
 SCENE_RATE = 30.0       # Hz (wall): scene updates
 TIME_RATE = 50.0        # Hz (wall): sim time broadcasts
-STATE_TOPICS = ('particle/pose', 'particle/twist', 'particle/contact_wrench', 'actuator/joint_states', '/clock')
+STATE_TOPICS = ('particle/pose', 'particle/twist', 'particle/contact_wrench', 'actuator/joint_states', '/clock',
+                'particles/poses', 'particles/states')
 SCENE_TOPIC = '/foxglove/scene'
 TRANSFORMS_TOPIC = '/foxglove/transforms'
 FRICTION_TOPIC = '/foxglove/friction_limit'
@@ -63,7 +65,7 @@ NOT_FORWARDED = ('/parameter_events',)     # rclpy's own, published by every nod
 
 # What the scene is built from: role -> topic (relative names match in any namespace).
 ROLES = {'pose': 'particle/pose', 'joints': 'actuator/joint_states', 'mode': 'particle/contact_state',
-         'parameters': 'simulator/parameters', 'wrench': 'particle/contact_wrench'}
+         'parameters': 'simulator/parameters', 'wrench': 'particle/contact_wrench', 'parts': 'particles/states'}
 
 
 class ViewerError(RuntimeError):
@@ -306,10 +308,20 @@ class Viewer:
         p, q = pose.pose.position, pose.pose.orientation
         theta = -2.0 * math.atan2(q.y, q.w)      # the pose's orientation is a rotation by -θ about y
         t_ns = message_stamp_ns(pose)
-        self.scene_channel.log(scene.update(t_ns, strokes, p.x, p.z, theta, mode.data if mode else ''),
-                               log_time=t_ns)
+        self.scene_channel.log(scene.update(t_ns, strokes, p.x, p.z, theta, mode.data if mode else '',
+                                            self._other_parts()), log_time=t_ns)
         self.transforms_channel.log(scene.transforms(t_ns, p.x, p.z, theta), log_time=t_ns)
         self.scenes_sent += 1
+
+    def _other_parts(self) -> list[tuple[float, float, str]]:
+        """Parts 1, 2, … as (x, z, mode) from the latest ``particles/states`` (none with one part)."""
+        states = self._latest('parts')
+        if states is None or len(states.layout.dim) != 2:
+            return []
+        table = np.asarray(states.data).reshape(states.layout.dim[0].size, states.layout.dim[1].size)
+        column = {name: k for k, name in enumerate(states.layout.dim[1].label.split(','))}
+        return [(float(row[column['x']]), float(row[column['z']]), MODES[int(row[column['mode']])])
+                for row in table[1:]]
 
     def _feeder_scene(self) -> FeederScene | None:
         """The scene of the geometry in the latest ``simulator/parameters`` (rebuilt when they change)."""

@@ -37,6 +37,10 @@ function decoderFor(channel) {
 }
 
 function summarize(topic, msg) {
+  if (msg.header && msg.poses) {
+    return { frame_id: msg.header.frame_id, xs: msg.poses.map((p) => p.position.x),
+             zs: msg.poses.map((p) => p.position.z) };
+  }
   if (msg.header && msg.pose) {
     return { frame_id: msg.header.frame_id, stamp: msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9,
              x: msg.pose.position.x, z: msg.pose.position.z };
@@ -50,7 +54,8 @@ function summarize(topic, msg) {
              actuators: (byId.actuators?.cubes ?? []).length,
              part: sphere ? { x: sphere.pose.position.x, z: sphere.pose.position.z, diameter: sphere.size.x,
                               color: [sphere.color.r, sphere.color.g, sphere.color.b],
-                              label: byId.part.texts[0]?.text } : null };
+                              label: byId.part.texts[0]?.text } : null,
+             other_parts: (byId.other_parts?.spheres ?? []).map((o) => ({ x: o.pose.position.x, z: o.pose.position.z })) };
   }
   if ("q_max" in msg) {
     return { friction: msg.friction, q_max: msg.q_max, normal_load: msg.normal_load };
