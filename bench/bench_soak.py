@@ -187,16 +187,17 @@ def run_case(n: int, minutes: float, cpu_target: float) -> dict:
     }
 
 
-def run_record_case(minutes: float) -> dict:
-    """``micro-feeder run --record`` for ``minutes`` (one process: simulator, actuator, recorder), then
-    ``micro-feeder resim`` of its log."""
+def run_record_case(minutes: float, settings: dict[str, object] | None = None, name: str = 'soak_run') -> dict:
+    """``micro-feeder run --record`` for ``minutes`` (one process: simulator, actuator, recorder; ``settings``
+    on top of the defaults), then ``micro-feeder resim`` of its log (``LOG_DIR/<name>_log``)."""
     from long_log import measure
 
     from micro_feeder.logs.reader import LogReader
-    log = LOG_DIR / 'soak_run_log'
+    log = LOG_DIR / f'{name}_log'
     shutil.rmtree(log, ignore_errors=True)
-    output = (LOG_DIR / 'soak_run.log').open('w')
-    proc = subprocess.Popen([str(BIN / 'micro-feeder'), 'run', '--set', 'stroke.count=0', '--record', str(log),
+    output = (LOG_DIR / f'{name}.log').open('w')
+    extra = [arg for key, value in (settings or {}).items() for arg in ('--set', f'{key}={value}')]
+    proc = subprocess.Popen([str(BIN / 'micro-feeder'), 'run', '--set', 'stroke.count=0', *extra, '--record', str(log),
                              '--duration', f'{minutes * 60.0:g}'], stdout=output, stderr=subprocess.STDOUT)
     diagnostics = Diagnostics()
     samples: list[tuple[float, float, float]] = []   # t, cpu, rss

@@ -89,6 +89,8 @@ def test_a_recorded_run_of_several_parts_resimulates_every_part_bit_for_bit(ros_
         rig.step(12)
         rig.wait(lambda: recorder.received['/particles/poses'] == poses + 12, 'every pose recorded')
         collisions = rig.sim.stepper.parts_state.collisions
+        final_modes = [p.mode for p in rig.sim.stepper.parts_state.parts]
+        final_positions = rig.sim.stepper.parts_state.positions.tolist()
     finally:
         recorder.close()
         recorder.destroy_node()
@@ -100,3 +102,13 @@ def test_a_recorded_run_of_several_parts_resimulates_every_part_bit_for_bit(ros_
     assert f'of {len(X0)} parts' in report.verdict()
     moved = resimulate(LogReader(tmp_path / 'log'), {'particle.x0': [*X0[:-1], X0[-1] + 10e-6]})
     assert not moved.identical and 9e-6 < moved.max_error < 11e-6, moved.verdict()
+    # info: every part's last recorded pose and mode; plot: the space-time picture beside the usual one
+    from micro_feeder.cli import main
+    from micro_feeder.logs.summary import summarize
+
+    summary = summarize(LogReader(tmp_path / 'log'))
+    assert [p.x for p in summary.parts] == final_positions
+    assert [p.mode for p in summary.parts] == final_modes
+    assert main(['plot', str(tmp_path / 'log'), '-o', str(tmp_path / 'run.png')]) == 0
+    assert (tmp_path / 'run_parts.png').stat().st_size > 10_000
+

@@ -4,6 +4,7 @@ against ±Q_max, normal load, height in flight and mode vs sim time, zoomed to w
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from . import CommandError
 from ._logs import open_log, report_loss
@@ -33,5 +34,37 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as err:
         raise CommandError(str(err)) from None
     print(f'wrote {path}')
+    parts = _plot_parts(log, args)
+    if parts is not None:
+        print(f'wrote {parts} (every part against time)')
     report_loss(log)
     return 0
+
+
+def _plot_parts(log, args: argparse.Namespace):
+    """With several parts (``particles/states``), their space–time picture beside the output
+    (``NAME_parts.png``); None with one part."""
+    import numpy as np
+
+    from ..plots.parts import plot_positions
+
+    rows = []
+    for m in log.messages(['particles/states'], decoded=True):
+        dims = m.message.layout.dim
+        if len(dims) == 2 and dims[0].size > 1:
+            rows.append((dims[1].label.split(','), np.asarray(m.message.data).reshape(dims[0].size, dims[1].size)))
+    if not rows:
+        return None
+    fields, first = rows[0]
+    rows = [table for labels, table in rows if labels == fields and table.shape == first.shape]
+    tables = np.stack(rows)
+    t = tables[:, 0, fields.index('t')]
+    keep = ((args.start is None) | (t >= (args.start or 0.0))) & ((args.end is None) | (t <= (args.end or np.inf)))
+    output = Path(args.output)
+    path = output.with_name(f'{output.stem}_parts{output.suffix or ".png"}')
+    try:
+        return plot_positions(t[keep], tables[keep, :, fields.index('x')], tables[keep, :, fields.index('mode')],
+                              path, f'{tables.shape[1]} parts of {log.path.name}: position against time '
+                              '(impacts are not recorded)')
+    except OSError as err:
+        raise CommandError(f'cannot write {path}: {err}') from None

@@ -59,6 +59,13 @@ def summary(sim: Any, actuator: Any, wall_s: float, log: str | None, fate: str =
              'transitions     ' + ', '.join(f'{k} {v}' for k, v in state.transitions.items()),
              f'commands        {actuator.bursts} bursts sent, {sim.rejected} rejected, {sim.commands.late} late; '
              f'{sim.overruns} loop overruns']
+    parts = sim.stepper.parts_state
+    if len(parts.parts) > 1:
+        lines[1] = f'part 0          {lines[1].removeprefix("part").lstrip()}'
+        lines[3:3] = [f'part {k:<10d} {p.mode} at x = {p.x * 1e3:.6f} mm, moved {p.distance * 1e6:+.3f} um, '
+                      f'transitions {", ".join(str(v) for v in p.transitions.values())}'
+                      for k, p in enumerate(parts.parts[1:], start=1)]
+        lines.insert(3 + len(parts.parts) - 1, f'impacts         {parts.collisions} between parts')
     if sim.error:
         lines.append(f'error           {sim.error}')
     if log:

@@ -15,6 +15,7 @@ import datetime
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..physics.dynamics import MODES
 from .coverage import Coverage, end_line, missing_command_lines, stall_lines
 from .reader import LogReader
 from .sim_parameters import recorded_parameters, run_mode
@@ -92,6 +93,7 @@ class LogSummary:
     recorder: dict[str, str] = field(default_factory=dict)
     recorder_source: str = ''  # 'summary', 'diagnostics' or ''
     start: MissingStart = field(default_factory=MissingStart)
+    parts: list[PartState] = field(default_factory=list)    # every part (particles/*), with several
 
     @property
     def message_count(self) -> int:
@@ -189,7 +191,26 @@ def summarize(log: LogReader) -> LogSummary:
     counters, source = recorder_counters(log)
     return LogSummary(log.path, log.files, sum(f.stat().st_size for f in log.files), log.truncated,
                       log.start_ns, log.duration, rows, part, simulator_run(log), counters, source,
-                      missing_start(log, part, counters))
+                      missing_start(log, part, counters), _parts(log))
+
+
+def _parts(log: LogReader) -> list[PartState]:
+    """Every part's first and last recorded pose and last mode, from ``particles/poses`` and ``particles/states``
+    (empty with one part or without those topics)."""
+    last, first = log.last('particles/poses'), log.first('particles/poses')
+    if last is None or first is None or len(last.message.poses) < 2:
+        return []
+    states = log.last('particles/states')
+    modes: list[str | None] = [None] * len(last.message.poses)
+    if states is not None and len(states.message.layout.dim) == 2:
+        fields = states.message.layout.dim[1].label.split(',')
+        width = states.message.layout.dim[1].size
+        if 'mode' in fields:
+            codes = states.message.data[fields.index('mode')::width]
+            modes = [MODES[int(c)] if 0 <= int(c) < len(MODES) else None for c in codes][:len(modes)]
+    return [PartState((last.stamp_ns or 0) * 1e-9, q.position.x, q.position.z, mode, (first.stamp_ns or 0) * 1e-9,
+                      p.position.x)
+            for q, p, mode in zip(last.message.poses, first.message.poses, modes, strict=False)]
 
 
 def _size(n: int) -> str:
@@ -273,6 +294,10 @@ def format_summary(s: LogSummary, coverage: Coverage | None = None) -> str:
         lines.append(f'part       {where}; mode {p.mode or "unknown"}')
         if p.x is not None and p.first_x is not None:
             lines.append(f'           moved {(p.x - p.first_x) * 1e6:+.3f} µm since t = {p.first_stamp:.4f} s')
+    if s.parts:
+        lines.append(f'parts      {len(s.parts)} (particles/poses) at t = {s.parts[0].stamp:.4f} s:')
+        lines += [f'  {k:>7d}  x = {q.x * 1e3:.4f} mm, z = {q.z * 1e6:.3f} µm, moved {(q.x - q.first_x) * 1e6:+.3f} µm;'
+                  f' mode {q.mode or "unknown"}' for k, q in enumerate(s.parts)]
     lines += _loss_lines(s, coverage)
     return '\n'.join(lines)
 

@@ -23,23 +23,32 @@ def plot_space_time(result: PartsResult, path: Path | str, title: str = '', gate
     """Positions (mm) of all parts against time; sliding stretches drawn solid and thick, stuck ones thin,
     flights dotted; impacts as black dots; the gate x = ``gate`` (m) as a dashed line; with ``size`` (m) each
     part drawn as a band that wide, so touching parts read as touching."""
-    factor, unit = time_scale(result.t)
-    t = result.t * factor
-    n = result.x.shape[1]
+    impacts = [(imp.t, _impact_x(result, imp)) for imp in result.state.impacts]
+    return plot_positions(result.t, result.x, result.modes, path, title, gate, size, impacts)
+
+
+def plot_positions(times: np.ndarray, x: np.ndarray, modes: np.ndarray, path: Path | str, title: str = '',
+                   gate: float | None = None, size: float | None = None,
+                   impacts: list[tuple[float, float]] | None = None) -> Path:
+    """:func:`plot_space_time` from arrays: ``times`` (s, n), ``x`` (m, n × parts), ``modes`` (n × parts, codes
+    of MODES); ``impacts`` as (t s, x m), none marked when None (a log does not record them)."""
+    result_x, result_modes = x, modes
+    factor, unit = time_scale(times)
+    t = times * factor
+    n = result_x.shape[1]
     colors = plt.get_cmap('tab10' if n <= 10 else 'viridis')
     fig, ax = plt.subplots(figsize=(9, 6))
     for k in range(n):
         color = colors(k if n <= 10 else k / max(n - 1, 1))
-        x = result.x[:, k] * MM
+        x = result_x[:, k] * MM
         if size is not None:
             ax.fill_between(t, x - 0.5 * size * MM, x + 0.5 * size * MM, color=color, alpha=0.18, lw=0)
         ax.plot(t, x, color=color, lw=0.8, label=f'part {k}' if n <= 10 else None)
         for mode, style in ((1, dict(lw=2.2, ls='-')), (2, dict(lw=1.4, ls=':'))):
-            ax.plot(t, np.where(result.modes[:, k] == mode, x, np.nan), color=color, **style)
-    impacts = result.state.impacts
+            ax.plot(t, np.where(result_modes[:, k] == mode, x, np.nan), color=color, **style)
     if impacts:
-        ax.plot([imp.t * factor for imp in impacts], [_impact_x(result, imp) * MM for imp in impacts], 'k.',
-                ms=4, label=f'impacts ({len(impacts)})')
+        ax.plot([ti * factor for ti, _ in impacts], [xi * MM for _, xi in impacts], 'k.', ms=4,
+                label=f'impacts ({len(impacts)})')
     if gate is not None:
         ax.axhline(gate * MM, color='k', ls='--', lw=0.8, label=f'gate x = {gate * MM:g} mm')
     ax.set(xlabel=f'time ({unit})', ylabel='x (mm)',

@@ -1,0 +1,57 @@
+"""Soak benchmark of many parts over ROS (issue 28): ``micro-feeder run --record`` with 16 parts, one per
+millimetre along a 16-actuator travelling wave (1 mm apart, phases (k mod 4)/4), continuous strokes streamed
+by the actuator, the simulator publishing every part at 1 kHz, for ``--minutes`` (default 1), then
+``micro-feeder resim`` of the log, which compares every part at every pose.
+
+Targets: median real-time factor (the simulator's ``/diagnostics``, once a second) >= 0.99; resim of the log
+IDENTICAL or within the real-time stop rounding (docs/logs.md); the recorder loses nothing.
+
+    .venv/bin/python bench/bench_parts_soak.py [--minutes M] [--parts N] [--json PATH | --no-json]
+
+Results: bench/results/bench_parts_soak.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import results_json
+from bench_soak import LOG_DIR, run_figures, run_record_case, run_report, wave_settings
+from results_json import figure
+
+
+def parts_settings(n: int) -> dict[str, object]:
+    """n actuators and n parts, one part 0.3 mm past each actuator's centre."""
+    return {**wave_settings(n), 'particle.x0': [round(k * 1e-3 + 0.3e-3, 6) for k in range(n)]}
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--minutes', type=float, default=1.0, help='minutes of continuous strokes (default 1)')
+    parser.add_argument('--parts', type=int, default=16, help='parts (and actuators), default 16')
+    results_json.add_arguments(parser, 'bench_parts_soak')
+    args = parser.parse_args()
+    LOG_DIR.mkdir(parents=True, exist_ok=True)
+    load = [round(x, 2) for x in os.getloadavg()]
+    started = time.perf_counter()
+    print(f'load average before: {os.getloadavg()}')
+    settings = {key: str(value).replace(' ', '') for key, value in parts_settings(args.parts).items()}
+    result = run_record_case(args.minutes, settings, name=f'soak_parts_{args.parts}')
+    print(f'{args.parts} parts on a {args.parts}-actuator travelling wave:')
+    print(run_report(result), flush=True)
+    verdict = result['resim']['stdout'].splitlines()[0] if result['resim']['stdout'] else '(no verdict)'
+    figures = [{**f, 'key': f'parts_{f["key"]}', 'what': f'{args.parts} parts: {f["what"]}'}
+               for f in run_figures(result)]
+    figures.append(figure('parts_resim_verdict', f'{args.parts} parts: resim of the log', verdict.split(':')[1].strip()
+                          if ':' in verdict else verdict, '', note=verdict))
+    print(f'load average after: {os.getloadavg()}')
+    results_json.save(args, 'bench_parts_soak', f'{args.parts} parts over ROS (soak)', figures, load_before=load,
+                      seconds=time.perf_counter() - started,
+                      purpose=f'{args.parts} parts along a travelling wave, continuous strokes, the simulator '
+                              'publishing every part at 1 kHz with a recorder in one process, then resim.')
+
+
+if __name__ == '__main__':
+    main()
