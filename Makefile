@@ -67,6 +67,7 @@ figures: $(STAMP)
 	$(BIN)/python $(IMG)/nodes_topics.py $(IMG)/nodes_topics.png
 
 bench: $(STAMP) foxglove-client
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -r bench/requirements-dem.txt
 	for b in bench/bench_*.py; do $(BIN)/python $$b || exit 1; done
 
 # docs/performance.md and README's table of figures, from what the benchmarks wrote to bench/results/*.json.
