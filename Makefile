@@ -57,6 +57,9 @@ figures: $(STAMP)
 	$(BIN)/micro-feeder simulate --out $(FIG_OUT) --set stroke.frequency=3000 --duration 0.3 --plot $(IMG)/simulate_takeoff.png
 	$(BIN)/micro-feeder simulate --out $(FIG_OUT) --params config/travelling_wave.yaml --plot $(IMG)/simulate_travelling_wave.png
 	$(BIN)/micro-feeder sweep --vary stroke.frequency=100:5000:200 --set stroke.count=5 --out $(FIG_OUT) --plot $(IMG)/sweep_frequency.png
+	$(BIN)/micro-feeder sweep --params config/travelling_wave.yaml --set stroke.count=40 \
+		--set 'particle.x0=[0.4e-3,0.55e-3,0.7e-3,0.85e-3,1.0e-3,1.15e-3,1.3e-3,1.45e-3]' --gate 0.9e-3 \
+		--vary stroke.amplitude=60e-6:200e-6:15 --out $(FIG_OUT) --plot $(IMG)/sweep_parts_collisions.png --quantity collisions
 	$(BIN)/micro-feeder run --duration 0.1 --set stroke.count=5 --real-time-factor 0.05 --record $(FIG_OUT)/run
 	$(BIN)/micro-feeder plot $(FIG_OUT)/run -o $(IMG)/run.png
 	$(BIN)/python docs/img/track_landing_laws.py $(IMG)/track_landing_laws.png
@@ -64,6 +67,7 @@ figures: $(STAMP)
 	$(BIN)/python $(IMG)/nodes_topics.py $(IMG)/nodes_topics.png
 
 bench: $(STAMP) foxglove-client
+	$(BIN)/python -m pip install --quiet --disable-pip-version-check -r bench/requirements-dem.txt
 	for b in bench/bench_*.py; do $(BIN)/python $$b || exit 1; done
 
 # docs/performance.md and README's table of figures, from what the benchmarks wrote to bench/results/*.json.

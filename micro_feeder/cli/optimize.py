@@ -70,7 +70,7 @@ def build_problem(args: argparse.Namespace) -> Problem:
         raise SettingsError('--objective target needs --target M (distance per stroke, m)')
     tolerance = args.tolerance if args.tolerance is not None else abs(args.target or 0.0) * 0.02
     try:
-        return Problem(Job(flat, args.duration), names, tuple((lo, hi) for _, lo, hi in ranges), objective,
+        return Problem(Job(flat, args.duration, args.gate), names, tuple((lo, hi) for _, lo, hi in ranges), objective,
                        args.direction, args.target or 0.0, tolerance, tuple(dict.fromkeys(args.constraint)),
                        tuple(is_integer(n) for n in names))
     except OptimizeError as err:

@@ -16,7 +16,7 @@ import numpy as np
 from ..physics.dynamics import MODES, FeederModel, RunResult, SimulationError
 from ..physics.parameters import ParameterError
 from ..physics.parts import PartsModel, PartsResult
-from ..physics.parts.figures import gate_figures, spacing_figures
+from ..physics.parts.figures import gate_figures, run_figures, sample_step
 from ..settings import SettingsError
 from . import CommandError
 from ._common import add_model_options, settings_from_args
@@ -31,9 +31,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         epilog='Examples: micro-feeder simulate --plot; micro-feeder simulate --set stroke.frequency=3000 '
                '--duration 0.3 --json; micro-feeder simulate --params config/feeder.yaml --out out')
     add_run_options(parser, 'simulate')
-    parser.add_argument('--gate', type=float, metavar='X',
-                        help='report the feed rate past x = X (m): parts per second crossing it forward, and the '
-                             'spacing between neighbouring parts (several parts: particle.x0 as a list)')
     parser.set_defaults(func=run)
 
 
@@ -49,6 +46,9 @@ def add_run_options(parser: argparse.ArgumentParser, stem: str) -> None:
     parser.add_argument('--json', action='store_true', help='print one JSON object and nothing else')
     parser.add_argument('--plot', metavar='FILE.png', nargs='?', const='',
                         help=f'write the plot (default file: DIR/{stem}.png)')
+    parser.add_argument('--gate', type=float, metavar='X',
+                        help='report the feed rate past x = X (m): parts per second crossing it forward '
+                             '(with several parts, particle.x0 as a list, also the spacing between neighbours)')
 
 
 def build_model(flat: dict[str, Any], **overrides: Any) -> FeederModel:
@@ -82,9 +82,8 @@ def run(args: argparse.Namespace) -> int:
         return run_parts(args, model)
     started = time.perf_counter()
     try:
-        length = model.default_duration() if args.duration is None else args.duration
         # rows every 1/200 stroke for smooth plots, at most ~5000 of them (over the default length)
-        result = model.run(duration=args.duration, output_step=max(0.005 / model.stroke.frequency, length / 5000))
+        result = model.run(duration=args.duration, output_step=sample_step(model, args.duration))
     except SimulationError as err:
         raise CommandError(str(err)) from err
     summary = {**result.summary(), 'wall_time_s': time.perf_counter() - started}
@@ -117,13 +116,10 @@ def run_parts(args: argparse.Namespace, model: FeederModel) -> int:
     parts = PartsModel(model)
     started = time.perf_counter()
     try:
-        length = model.default_duration() if args.duration is None else args.duration
-        result = parts.run(duration=args.duration, output_step=max(0.005 / model.stroke.frequency, length / 5000))
+        result = parts.run(duration=args.duration, output_step=sample_step(model, args.duration))
     except SimulationError as err:
         raise CommandError(str(err)) from err
-    summary = {**result.summary(), 'wall_time_s': time.perf_counter() - started,
-               **spacing_figures(result.state.positions),
-               **(gate_figures(result.t, result.x, args.gate) if args.gate is not None else {})}
+    summary = {**run_figures(result, args.gate), 'wall_time_s': time.perf_counter() - started}
     out = Path(args.out)
     try:
         out.mkdir(parents=True, exist_ok=True)

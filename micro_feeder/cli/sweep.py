@@ -14,7 +14,7 @@ from typing import Any
 from tqdm import tqdm
 
 from ..explore.designs import DESIGNS, Grid, RunPlan, Sampled, parse_axis, parse_perturbation, parse_range
-from ..explore.evaluate import RESULT_COLUMNS, Job, model_for
+from ..explore.evaluate import QUANTITIES, Job, model_for
 from ..explore.runners import Runner, RunnerError
 from ..explore.sweep import PointSummary, base_values, estimate_seconds, run_plan, too_big
 from ..physics.parameters import ParameterError
@@ -33,14 +33,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description='Run the offline simulation for every point of a design and write one row per run '
                     '(CSV, or JSON with --json): the varied parameters, the distance per stroke (only for '
                     'runs whose part settled: a part still in flight has travelled no distance yet), the '
-                    'settled flag, the regime (stuck / slides / flies) and the transition counts. Runs on '
-                    'local processes, or on a Dask cluster with --scheduler.',
+                    'settled flag, the regime (stuck / slides / flies) and the transition counts; with '
+                    'several parts (particle.x0 a list) also the impacts, the spacing and each part\'s '
+                    'figures, and with --gate X the feed rate past x = X. Runs on local processes, or on a '
+                    'Dask cluster with --scheduler.',
         epilog='Examples: micro-feeder sweep --vary stroke.frequency=100:5000:200 --plot; '
                'micro-feeder sweep --vary stroke.frequency=500:3000:40 --vary stroke.amplitude=20e-6:200e-6:40 '
                '--plot (a map); micro-feeder sweep --vary stroke.frequency=500:3000 --vary '
                'stroke.amplitude=20e-6:200e-6 --samples 200 --seed 1; micro-feeder sweep --vary '
                'stroke.frequency=500:2000:30 --perturb contact.friction_scale=normal:10% --replicates 50 '
-               '--plot (bands). docs/explore.md has more.')
+               '--plot (bands); micro-feeder sweep --params config/travelling_wave.yaml --set '
+               '"particle.x0=[0.4e-3,0.7e-3,1.0e-3]" --gate 0.9e-3 --vary stroke.amplitude=100e-6:200e-6:11 '
+               '--plot --quantity feed_rate_hz (several parts). docs/explore.md and docs/parts.md have more.')
     add_run_options(parser, 'sweep')
     parser.add_argument('--vary', action='append', default=[], metavar='NAME=START:STOP:N | NAME=V1,V2,...',
                         help='a parameter to vary; repeat for a full grid (the product of the values). '
@@ -55,6 +59,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument('--replicates', type=int, default=100, metavar='N',
                         help='with --perturb: Monte Carlo runs per point (default 100)')
     parser.add_argument('--seed', type=int, default=0, help='seed of --samples and --perturb draws (default 0)')
+    parser.add_argument('--quantity', choices=tuple(QUANTITIES), metavar='COLUMN',
+                        help='with --plot over 1 or 2 parameters (no --perturb): the result column to draw, e.g. '
+                             'feed_rate_hz or collisions (several parts), max_speed_mps; default: the distance '
+                             'per stroke (the mean conveying velocity on a map of a track)')
     add_runner_options(parser)
     parser.set_defaults(func=run)
 
@@ -80,12 +88,16 @@ def run(args: argparse.Namespace) -> int:
     if args.duration is not None and not (math.isfinite(args.duration) and args.duration > 0):
         raise CommandError(f'--duration must be a positive number of seconds, got {args.duration}')
     plan = build_plan(args)
-    job = Job(flat, args.duration)
+    job = Job(flat, args.duration, args.gate)
     for run_number in (0, len(plan) - 1):           # refuse bad values before starting any worker
         try:
             model_for(job, plan.changes(run_number, base_values(job.base, plan.columns)))
         except ParameterError as err:
             raise SettingsError(str(err)) from err
+    if args.quantity is not None and args.quantity not in job.columns:
+        raise SettingsError(f'--quantity {args.quantity}: not a column of these runs '
+                            f'({"several parts" if job.several_parts else "one part"}'
+                            f'{", a gate" if args.gate is not None else ", no --gate"})')
     out = Path(args.out)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -125,7 +137,7 @@ def describe_runs(job: Job, plan: RunPlan) -> str:
 def _write_rows(job: Job, plan: RunPlan, runner: Runner, out: Path, as_json: bool
                 ) -> tuple[dict[str, int], PointSummary | None]:
     """Stream the rows to DIR/sweep.csv (and, with --json, to stdout as they come); count the regimes."""
-    columns = ('run', *(('point',) if plan.replicates > 1 else ()), *plan.columns, *RESULT_COLUMNS)
+    columns = ('run', *(('point',) if plan.replicates > 1 else ()), *plan.columns, *job.columns)
     summary = PointSummary(plan) if plan.replicates > 1 else None
     counts: dict[str, int] = {}
     bar = tqdm(total=len(plan), file=sys.stderr, unit='run', desc='sweep', smoothing=0.1)
@@ -137,7 +149,7 @@ def _write_rows(job: Job, plan: RunPlan, runner: Runner, out: Path, as_json: boo
                 sys.stdout.write(json.dumps({'parameters': list(plan.columns), 'design': plan.design.kind,
                                              'runs': len(plan)})[:-1] + ', "rows": [')
             for i, row in enumerate(run_plan(job, plan, runner, progress=bar.update)):
-                writer.writerow(row)
+                writer.writerow(_csv_row(row))
                 counts[row['regime']] = counts.get(row['regime'], 0) + 1
                 counts['unsettled'] = counts.get('unsettled', 0) + (not row['settled'])
                 if summary is not None:
@@ -149,6 +161,11 @@ def _write_rows(job: Job, plan: RunPlan, runner: Runner, out: Path, as_json: boo
     finally:
         bar.close()
     return counts, summary
+
+
+def _csv_row(row: dict[str, Any]) -> dict[str, Any]:
+    """A row as the CSV holds it: a list or a dict (each part's figures) as JSON text, None as empty."""
+    return {k: json.dumps(v) if isinstance(v, list | dict) else v for k, v in row.items()}
 
 
 def _json_row(row: dict[str, Any]) -> dict[str, Any]:
@@ -170,7 +187,7 @@ def _report(args: argparse.Namespace, plan: RunPlan, out: Path, counts: dict[str
         if args.plot is not None:
             from ..plots.sweep import plot_sweep_table
             paths.append(plot_sweep_table(out / 'sweep.csv', plan, Path(args.plot) if args.plot else out / 'sweep.png',
-                                          summary_rows, setting))
+                                          summary_rows, setting, args.quantity))
     except OSError as err:
         raise CommandError(f'cannot write to {err.filename}: {err.strerror}') from err
     except ValueError as err:
@@ -195,12 +212,26 @@ def _report(args: argparse.Namespace, plan: RunPlan, out: Path, counts: dict[str
     return 0
 
 
+# Columns of several parts shown in the terminal table when the runs have them: heading, column, scale.
+PARTS_SHOWN = (('impacts', 'collisions', 1.0), ('min spacing (um)', 'spacing_min_m', 1e6),
+               ('feed rate (1/s)', 'feed_rate_hz', 1.0))
+
+
 def _print_table(path: Path, plan: RunPlan) -> None:
     names = plan.columns
-    print(' '.join(f'{n:>20}' for n in names) + f" {'per stroke (um)':>16} {'regime':>7} {'settled':>8}")
     with path.open() as handle:
-        for row in csv.DictReader(handle):
-            per_stroke = float(row['distance_per_stroke_m']) * 1e6
-            shown = f'{per_stroke:.6g}' if math.isfinite(per_stroke) else f"({row['final_mode']})"
-            print(' '.join(f'{float(row[n]):>20.6g}' for n in names)
-                  + f" {shown:>16} {row['regime']:>7} {row['settled']:>8}")
+        rows = list(csv.DictReader(handle))
+    extra = [(heading, column, scale) for heading, column, scale in PARTS_SHOWN if rows and column in rows[0]]
+    print(' '.join(f'{n:>20}' for n in names) + f" {'per stroke (um)':>16} {'regime':>7} {'settled':>8}"
+          + ''.join(f' {heading:>16}' for heading, _, _ in extra))
+    for row in rows:
+        per_stroke = float(row['distance_per_stroke_m']) * 1e6
+        shown = f'{per_stroke:.6g}' if math.isfinite(per_stroke) else f"({row['final_mode']})"
+        print(' '.join(f'{float(row[n]):>20.6g}' for n in names)
+              + f" {shown:>16} {row['regime']:>7} {row['settled']:>8}"
+              + ''.join(f' {_scaled_cell(row[column], scale):>16}' for _, column, scale in extra))
+
+
+def _scaled_cell(text: str, scale: float) -> str:
+    """A CSV cell as a number times ``scale`` (6 significant digits), or '-' when empty."""
+    return f'{float(text) * scale:.6g}' if text else '-'

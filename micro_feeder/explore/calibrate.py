@@ -125,7 +125,7 @@ def calibrate(paths: Sequence[str], start: Mapping[str, float], runner: Runner,
     """Fit the parameters ``start`` (name -> starting value, each ≠ 0) to the logs ``paths``."""
     specs = model_specs()
     for name, value in start.items():
-        if name not in specs or specs[name][0].kind not in ('float', 'int'):
+        if name not in specs or specs[name][0].kind not in ('float', 'int', 'float_or_list'):
             raise CalibrationError(f'{name}: not a numeric model parameter (see docs/parameters.md)')
         if not value or not math.isfinite(value):
             raise CalibrationError(f'{name}: the start must be a finite non-zero value (the fit is relative to it); '

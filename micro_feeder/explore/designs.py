@@ -22,12 +22,13 @@ DISTRIBUTIONS = ('normal', 'uniform', 'lognormal')
 
 
 def _numeric(name: str, option: str) -> str:
-    """``name`` if it is a scalar numeric model parameter, else a SettingsError saying what is accepted."""
+    """``name`` if it is a scalar numeric model parameter (or one that takes a number or a list, such as
+    ``particle.x0``: it is varied as one number, one part), else a SettingsError saying what is accepted."""
     known = known_parameters()
     if name not in known:
         raise SettingsError(f'{option} {name!r}: not a parameter name (see docs/parameters.md)')
     kind = known[name][0].kind
-    if kind not in ('float', 'int'):
+    if kind not in ('float', 'int', 'float_or_list'):
         raise SettingsError(f'{option} {name}: only scalar numeric parameters can be varied ({kind})')
     return name
 

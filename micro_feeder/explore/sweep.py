@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from ..physics.parameters import ParameterError
 from ..settings import known_parameters
 from .designs import RunPlan
 from .evaluate import REGIMES, Job, evaluate, evaluate_chunk
@@ -23,9 +24,17 @@ MAX_ESTIMATE_S = 3600.0       # so does a run estimated to take longer than this
 
 
 def base_values(flat: Mapping[str, Any], names: tuple[str, ...]) -> dict[str, float]:
-    """The value of each named parameter in the base settings (its default when not set)."""
+    """The value of each named parameter in the base settings (its default when not set).
+
+    Raises ParameterError for a parameter that is a list there (``particle.x0`` of several parts): a sweep
+    varies one number."""
     known = known_parameters()
-    return {name: float(flat.get(name, known[name][1])) for name in names}
+    values = {name: flat.get(name, known[name][1]) for name in names}
+    for name, value in values.items():
+        if isinstance(value, list | tuple):
+            raise ParameterError(name, list(value), 'a list in the base settings cannot be swept: a sweep '
+                                 'varies one number (vary another parameter, or set one value)')
+    return {name: float(value) for name, value in values.items()}
 
 
 def chunk_size(runs: int, workers: int) -> int:

@@ -1,4 +1,5 @@
-"""Sweep figures: distance per stroke against one parameter, maps over two, Monte Carlo bands.
+"""Sweep figures: distance per stroke against one parameter, maps over two, Monte Carlo bands; or any
+numeric result column (``quantity``: e.g. the feed rate or the impacts of several parts) over one or two.
 
 Distances are drawn only for runs whose part settled (a part still in flight has not travelled a
 distance yet); unsettled runs are marked where they are, by regime. Axes use units that suit the
@@ -18,11 +19,12 @@ import matplotlib
 matplotlib.use('Agg')
 import matplotlib.pyplot as plt
 import numpy as np
-from matplotlib.colors import ListedColormap, SymLogNorm
+from matplotlib.colors import ListedColormap, Normalize, SymLogNorm
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from ..explore.designs import Perturbation, RunPlan
+from ..explore.evaluate import QUANTITIES
 from ..settings import known_parameters
 from .dynamics import save
 
@@ -70,14 +72,20 @@ def read_table(path: Path) -> dict[str, np.ndarray]:
 
 
 def plot_sweep_table(table: Path, plan: RunPlan, path: Path | str, summary: Sequence[dict[str, Any]] = (),
-                     setting: str = '') -> Path:
+                     setting: str = '', quantity: str | None = None) -> Path:
     """The figure that suits the plan: a curve (1 parameter), a map (2), Monte Carlo bands or a map of
     the mean (with --perturb). ``setting``: a line saying what the runs share (strokes, part ...).
-    Raises ValueError for 3 or more varied parameters."""
+    ``quantity``: a column of :data:`~micro_feeder.explore.evaluate.QUANTITIES` to draw instead of the
+    distance per stroke (over 1 or 2 parameters, no Monte Carlo). Raises ValueError for 3 or more varied
+    parameters, or a quantity with a Monte Carlo."""
     setting = textwrap.fill(setting, 80)
     points = [plan.design.point(i) for i in range(len(plan.design))]
     names = tuple(n for j, n in enumerate(plan.design.names) if len({p[j] for p in points}) > 1)  # a lone value:
-    if summary:                                                                               # not an axis
+    if quantity is not None:                                                                  # not an axis
+        if summary:
+            raise ValueError(f'{quantity}: a Monte Carlo plot shows the distance per stroke; drop --quantity')
+        return plot_quantity(names, read_table(table), quantity, path, setting, gridded=plan.design.kind == 'grid')
+    if summary:
         context = '\n'.join(filter(None, (setting, _context(plan))))
         if len(names) == 1:
             return plot_bands(names[0], summary, path, context)
@@ -100,6 +108,38 @@ def plot_sweep_table(table: Path, plan: RunPlan, path: Path | str, summary: Sequ
         return plot_map(names, data, distance, regime_index, path, 'Distance per stroke', setting,
                         gridded=plan.design.kind == 'grid')
     raise ValueError(f'a plot shows 1 or 2 varied parameters, this sweep varies {len(names) or "none"}')
+
+
+def plot_quantity(names: Sequence[str], data: dict[str, np.ndarray], quantity: str, path: Path | str,
+                  setting: str = '', gridded: bool = True) -> Path:
+    """The column ``quantity`` of every run (not only the settled ones) against one parameter (a marker per
+    regime, joined by a line), or a map over two (a linear colour scale from 0 when no value is negative).
+    Raises ValueError for 3 or more varied parameters."""
+    what, unit = QUANTITIES[quantity]
+    values = np.asarray(data[quantity], dtype=float)
+    regime_index = np.array([list(REGIME_STYLE).index(r) if r in REGIME_STYLE else -1 for r in data['regime']])
+    if len(names) == 2:
+        finite = values[np.isfinite(values)]
+        return plot_map(names, data, values, regime_index, path, what[:1].upper() + what[1:], setting,
+                        gridded=gridded, quantity=(what, unit), linear=bool(finite.size and finite.min() >= 0),
+                        missing='no value (e.g. under two crossings of the gate, or a run that failed)')
+    if len(names) != 1:
+        raise ValueError(f'a plot shows 1 or 2 varied parameters, this sweep varies {len(names) or "none"}')
+    x, xlabel = _scaled(names[0], data[names[0]])
+    order = np.argsort(x)
+    factor, unit_label = unit_scale(unit, values)
+    y = values * factor
+    fig, ax = plt.subplots(figsize=(8, 4.8))
+    ax.plot(x[order], y[order], '-', color='C0', lw=0.8, alpha=0.6)
+    for regime, (color, marker) in REGIME_STYLE.items():
+        selected = data['regime'] == regime
+        if selected.any():
+            ax.plot(x[selected], y[selected], marker, color=color, ms=4, ls='none', label=REGIME_LABEL[regime])
+    ax.set(xlabel=xlabel, ylabel=axis_label(what, unit_label),
+           title=f'{what[:1].upper() + what[1:]} vs {names[0]}' + (f'\n{setting}' if setting else ''))
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return save(fig, path)
 
 
 def _context(plan: RunPlan) -> str:
@@ -148,10 +188,12 @@ def _regime_of_fractions(cols: dict[str, np.ndarray]) -> np.ndarray:
 
 def plot_map(names: Sequence[str], data: dict[str, np.ndarray], value: str | np.ndarray,
              regime_index: np.ndarray, path: Path | str, title: str, context: str = '',
-             gridded: bool = True, quantity: tuple[str, str] = ('distance per stroke', 'm')) -> Path:
+             gridded: bool = True, quantity: tuple[str, str] = ('distance per stroke', 'm'), linear: bool = False,
+             missing: str | None = None) -> Path:
     """Heat map of ``quantity`` (what, SI unit; distance per stroke by default) over two parameters
-    (symmetric log colour scale: micrometres of creep and millimetres of flight on one map), regime
-    boundaries drawn as lines, cells with no value (the part not at rest) hatched."""
+    (symmetric log colour scale: micrometres of creep and millimetres of flight on one map; with ``linear``
+    a linear one from 0, for counts and rates), regime boundaries drawn as lines, cells with no value (the
+    part not at rest) hatched; ``missing`` says what a cell with no value means."""
     values = data[value] if isinstance(value, str) else value
     x, xlabel = _scaled(names[0], data[names[0]])
     y, ylabel = _scaled(names[1], data[names[1]])
@@ -159,13 +201,15 @@ def plot_map(names: Sequence[str], data: dict[str, np.ndarray], value: str | np.
     z = values * factor
     finite = np.abs(z[np.isfinite(z)])
     top = max(finite.max(), 1e-3) if finite.size else 1.0
-    norm = SymLogNorm(linthresh=max(top * 1e-3, 1e-3), vmin=-top, vmax=top, base=10)
+    norm = (Normalize(vmin=0.0, vmax=top) if linear else
+            SymLogNorm(linthresh=max(top * 1e-3, 1e-3), vmin=-top, vmax=top, base=10))
+    cmap = 'viridis' if linear else 'coolwarm'
     fig, ax = plt.subplots(figsize=(8.5, 6))
     if gridded:
         xs, ys = np.unique(x), np.unique(y)
         shape = (xs.size, ys.size)
         grid = lambda v: v.reshape(shape).T  # noqa: E731 - rows of the table: names[0] slowest
-        mesh = ax.pcolormesh(xs, ys, grid(z), cmap='coolwarm', norm=norm, shading='nearest')
+        mesh = ax.pcolormesh(xs, ys, grid(z), cmap=cmap, norm=norm, shading='nearest')
         missing = np.ma.masked_where(np.isfinite(grid(z)), np.ones(shape[::-1]))
         ax.pcolor(xs, ys, missing, hatch='///', cmap=ListedColormap(['none']), shading='nearest',
                   edgecolor='0.6', lw=0)
@@ -174,18 +218,19 @@ def plot_map(names: Sequence[str], data: dict[str, np.ndarray], value: str | np.
                                colors=['k', 'k'], linewidths=[1.2, 2.0], linestyles=['--', '-'])
             ax.clabel(lines, fmt={0.5: 'stuck | slides', 1.5: 'contact | flight'}, fontsize=7)
     else:
-        mesh = ax.scatter(x, y, c=z, cmap='coolwarm', norm=norm, s=25)
+        mesh = ax.scatter(x, y, c=z, cmap=cmap, norm=norm, s=25)
         ax.scatter(x[~np.isfinite(z)], y[~np.isfinite(z)], marker='x', color='0.4', s=20)
         for i, (regime, (color, marker)) in enumerate(REGIME_STYLE.items()):
             sel = regime_index == i
             ax.scatter(x[sel], y[sel], marker=marker, facecolors='none', edgecolors=color, s=60, lw=0.6,
                        label=regime)
         ax.add_artist(ax.legend(fontsize=8, title='regime', loc='upper left'))
-    bar = fig.colorbar(mesh, ax=ax, label=f'{quantity[0]} ({unit})')
-    bar.set_ticks(symlog_ticks(norm.linthresh, top))
+    bar = fig.colorbar(mesh, ax=ax, label=axis_label(quantity[0], unit))
+    if not linear:
+        bar.set_ticks(symlog_ticks(norm.linthresh, top))
     if not np.isfinite(z).all():
-        label = ('part not at rest when the run ended: no distance' if quantity[1] == 'm' else
-                 'no value (a run shorter than the burst, or one stroke)')
+        label = missing or ('part not at rest when the run ended: no distance' if quantity[1] == 'm' else
+                            'no value (a run shorter than the burst, or one stroke)')
         handle = (Patch(facecolor='none', edgecolor='0.5', hatch='///', label=label) if gridded else
                   Line2D([], [], marker='x', color='0.4', ls='none', label=label))
         ax.legend(handles=[handle], fontsize=8, loc='lower right')

@@ -1,9 +1,20 @@
 """Feeder figures of a many-part run: the feed rate past a gate and the spacing between neighbours
-(docs/parts.md). Numbers in, numbers out (s, m)."""
+(docs/parts.md). Numbers in, numbers out (s, m).
+
+:func:`sample_step` and :func:`run_figures` are the one way ``simulate`` and ``sweep`` sample a run and
+reduce it to its figures, so the two give the same numbers for the same point."""
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+
+from ..dynamics import FeederModel
+from .model import PartsResult
+
+SAMPLE_PERIODS = 0.005        # positions sampled every this fraction of a stroke period ...
+MAX_SAMPLES = 5000            # ... but at most about this many over the run length
 
 
 def gate_crossings(t: np.ndarray, x: np.ndarray, gate: float) -> np.ndarray:
@@ -37,3 +48,19 @@ def spacing_figures(positions: np.ndarray) -> dict[str, float | None]:
     if spacing.size == 0:
         return {'spacing_mean_m': None, 'spacing_min_m': None}
     return {'spacing_mean_m': float(spacing.mean()), 'spacing_min_m': float(spacing.min())}
+
+
+def sample_step(model: FeederModel, duration: float | None) -> float:
+    """The step (s) at which a run's positions are sampled: 1/200 of a stroke period, or longer so that
+    the run (``duration`` s, or the model's default length) has at most ~5000 samples. The gate's
+    crossings are interpolated between these samples."""
+    length = model.default_duration() if duration is None else duration
+    return max(SAMPLE_PERIODS / model.stroke.frequency, length / MAX_SAMPLES)
+
+
+def run_figures(result: PartsResult, gate: float | None = None) -> dict[str, Any]:
+    """The figures of a many-part run (JSON-able): :meth:`PartsResult.summary` (``parts``, ``collisions``,
+    ``settled``, ``sim_time_s``), the spacing where the parts end and, with a ``gate`` (m), the feed rate
+    past it (:func:`gate_figures`)."""
+    return {**result.summary(), **spacing_figures(result.state.positions),
+            **(gate_figures(result.t, result.x, gate) if gate is not None else {})}
