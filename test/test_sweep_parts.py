@@ -119,6 +119,7 @@ def test_one_part_with_a_gate_gives_simulates_gate_figures(tmp_path):
 
 @pytest.mark.parametrize('args, message', [
     (['--vary', 'stroke.frequency=800,900', '--plot', '--quantity', 'feed_rate_hz'], 'not a column'),
+    ([*TRAVELLING_WAVE, '--vary', 'stroke.frequency=800,900', '--quantity', 'collisions'], 'needs --plot'),
     ([*TRAVELLING_WAVE, '--vary', 'particle.x0=1e-4,2e-4'], 'a list in the base settings cannot be swept'),
     ([*TRAVELLING_WAVE, '--vary', 'stroke.frequency=800,900', '--perturb', 'contact.friction_scale=normal:1%',
       '--replicates', '2', '--plot', '--quantity', 'collisions'], 'Monte Carlo'),

@@ -94,6 +94,10 @@ def run(args: argparse.Namespace) -> int:
             model_for(job, plan.changes(run_number, base_values(job.base, plan.columns)))
         except ParameterError as err:
             raise SettingsError(str(err)) from err
+    if args.quantity is not None and (args.plot is None or plan.replicates > 1):
+        raise SettingsError(f'--quantity {args.quantity}: draws a column with --plot, over 1 or 2 parameters; a '
+                            'Monte Carlo plot shows the distance per stroke' if args.plot is not None else
+                            f'--quantity {args.quantity} needs --plot')
     if args.quantity is not None and args.quantity not in job.columns:
         raise SettingsError(f'--quantity {args.quantity}: not a column of these runs '
                             f'({"several parts" if job.several_parts else "one part"}'
