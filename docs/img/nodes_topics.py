@@ -27,6 +27,9 @@ STATE = [
     ('particle/contact_wrench', 'geometry_msgs/WrenchStamped', 'reliable, volatile, depth 100'),
     ('particle/contact_state', 'std_msgs/String', 'reliable, transient local, keep last 1000'),
     ('particle/transitions', 'diagnostic_msgs/DiagnosticArray', 'reliable, volatile, keep last 1000'),
+    ('particles/poses', 'geometry_msgs/PoseArray', 'reliable, volatile, depth 100'),
+    ('particles/states', 'std_msgs/Float64MultiArray', 'reliable, volatile, depth 100'),
+    ('particles/transitions', 'diagnostic_msgs/DiagnosticArray', 'reliable, volatile, keep last 1000'),
     ('actuator/joint_states', 'sensor_msgs/JointState', 'reliable, volatile, depth 100'),
     ('surface/markers', 'visualization_msgs/MarkerArray', 'reliable, volatile, depth 1'),
     ('simulator/parameters', 'rcl_interfaces/ParameterEvent', 'reliable, transient local, depth 1'),
@@ -65,46 +68,50 @@ def line(ax, points: list[tuple[float, float]], **style) -> None:
 
 
 def draw(out: Path) -> None:
-    fig, ax = plt.subplots(figsize=(14.5, 8.0))
+    step, bottom = 0.84, 1.2                       # the state topics' column, from the bottom up
+    top = bottom + (len(STATE) - 1) * step
+    lift = top - 9.6                               # everything else moves up with the column's top
+    fig, ax = plt.subplots(figsize=(14.5, 8.0 * (12.0 + lift) / 12.0))
     ax.set_xlim(0, 23.5)
-    ax.set_ylim(-1.5, 10.5)
+    ax.set_ylim(-1.5, 10.5 + lift)
     ax.axis('off')
+    mid = lift / 2.0
 
     # left: who sends strokes
-    node(ax, 1.95, 8.0, 3.8, 2.6, 'actuator', ['plays stroke.* as a burst', 'or a stream (stroke.count 0,',
+    node(ax, 1.95, 8.0 + mid, 3.8, 2.6, 'actuator', ['plays stroke.* as a burst', 'or a stream (stroke.count 0,',
                                                'follows actuator/joint_states)', 'services ~/start, ~/stop'])
-    node(ax, 1.95, 3.5, 3.8, 2.7, 'your controller', ['or feed_controller', '(micro-feeder hil)',
+    node(ax, 1.95, 3.5 + mid, 3.8, 2.7, 'your controller', ['or feed_controller', '(micro-feeder hil)',
                                                       'lockstep: each command', 'or simulator/step = 1 step'])
     # commands
-    for (name, kind, qos), y in zip(COMMANDS, (7.0, 5.4), strict=True):
+    for (name, kind, qos), y in zip(COMMANDS, (7.0 + mid, 5.4 + mid), strict=True):
         topic(ax, 6.75, y, name, kind.split('/')[1], qos, w=4.5)
-    arrow(ax, (3.85, 7.7), (4.5, 7.1))
-    arrow(ax, (3.85, 4.3), (4.5, 6.85))
-    arrow(ax, (3.85, 3.9), (4.5, 5.3))
+    arrow(ax, (3.85, 7.7 + mid), (4.5, 7.1 + mid))
+    arrow(ax, (3.85, 4.3 + mid), (4.5, 6.85 + mid))
+    arrow(ax, (3.85, 3.9 + mid), (4.5, 5.3 + mid))
     # the simulator
-    node(ax, 11.1, 5.3, 3.4, 9.0, 'simulator', ['checks every command', '(a bad one is refused,', 'counted, logged)',
+    node(ax, 11.1, 5.3 + mid, 3.4, 9.0 + lift, 'simulator',
+         ['checks every command', '(a bad one is refused,', 'counted, logged)',
                                                 '', 'integrates the part', 'on sim time, publishes', 'at 1 kHz', '',
                                                 'services', '~/reset  ~/pause', '~/step', '', 'parameters: every',
                                                 'model parameter', '+ real_time_factor,', 'lockstep, ...'])
-    arrow(ax, (9.0, 7.0), (9.4, 7.0))
-    arrow(ax, (9.0, 5.4), (9.4, 5.4))
+    arrow(ax, (9.0, 7.0 + mid), (9.4, 7.0 + mid))
+    arrow(ax, (9.0, 5.4 + mid), (9.4, 5.4 + mid))
     # state out, to a bus every subscriber takes from
-    top, step, bus = 9.6, 0.84, 19.9
+    bus = 19.9
     for i, (name, kind, qos) in enumerate(STATE):
         y = top - i * step
         topic(ax, 16.35, y, name, kind, qos, w=6.3)
         arrow(ax, (12.8, y), (13.2, y), lw=0.8)
         ax.plot([19.5, bus], [y, y], color=LINE, lw=0.8)
-    bottom = top - (len(STATE) - 1) * step
     ax.plot([bus, bus], [top, bottom - 0.9], color=LINE, lw=1.0)
     # right: who listens
-    node(ax, 22.0, 7.0, 2.4, 2.4, 'recorder', ['every topic', '→ MCAP log', '~/stop'])
-    node(ax, 22.0, 3.2, 2.4, 2.4, 'viewers', ['RViz, Foxglove', '(--foxglove),', 'your nodes'])
-    arrow(ax, (bus, 7.0), (20.8, 7.0))
-    arrow(ax, (bus, 3.2), (20.8, 3.2))
+    node(ax, 22.0, 7.0 + mid, 2.4, 2.4, 'recorder', ['every topic', '→ MCAP log', '~/stop'])
+    node(ax, 22.0, 3.2 + mid, 2.4, 2.4, 'viewers', ['RViz, Foxglove', '(--foxglove),', 'your nodes'])
+    arrow(ax, (bus, 7.0 + mid), (20.8, 7.0 + mid))
+    arrow(ax, (bus, 3.2 + mid), (20.8, 3.2 + mid))
     # back to the controller
-    line(ax, [(bus, bottom - 0.9), (bus, -0.45), (1.95, -0.45), (1.95, 2.15)], color='#8a6d3b')
-    ax.text(10.8, -0.3, 'particle/*, /clock: the state your controller decides on '
+    line(ax, [(bus, bottom - 0.9), (bus, -0.45), (1.95, -0.45), (1.95, 2.15 + mid)], color='#8a6d3b')
+    ax.text(10.8, -0.3, 'particle/*, particles/*, /clock: the state your controller decides on '
             '(every message of one instant carries the same sim-time stamp)', ha='center', va='bottom',
             fontsize=8.5, color='#8a6d3b')
     ax.text(0.1, -1.2, 'Names are relative: --namespace feeder1 (or -r __ns:=/feeder1) moves every topic and '
