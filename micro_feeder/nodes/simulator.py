@@ -49,7 +49,7 @@ from visualization_msgs.msg import MarkerArray
 from ..interface import messages, stamps, wire
 from ..interface.names import joint_names, receipt_frame
 from ..interface.transitions import TransitionEncoder
-from ..physics.dynamics import Event, SimulationError
+from ..physics.dynamics import Event, Observation, SimulationError
 from ..physics.parameters import ParameterError, ParamSpec
 from ..realtime.diagnostics import LoopSnapshot, achieved_rtf, loop_status
 from ..realtime.intake import CommandIntake, IntakeCounters, Outcome, Received, ThrottledLog, plan
@@ -59,6 +59,7 @@ from ..sim.commands import parse_setpoints, parse_trajectory, parse_trajectory_c
 from ..sim.stepper import Stepper, build_model
 from ._ros import SERVICE_QOS, status_name, topic_qos
 from .parameters import check_changes, declare, values
+from .sim_control import Busy, SimulationControl
 from .spin import NodeRefused, spin_node
 
 NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
@@ -102,10 +103,6 @@ class DuplicateSimulator(NodeRefused):
 
 
 DUPLICATE_DISCOVERY_S = 0.5   # s after the node is created that the graph is watched for an older simulator
-
-
-class Busy(Exception):
-    """The simulator's lock could not be taken in time: a tick (or a large command) is still working."""
 
 
 class Simulator(Node):
@@ -173,6 +170,7 @@ class Simulator(Node):
         self.create_service(Trigger, '~/reset', self._on_reset, qos_profile=SERVICE_QOS)
         self.create_service(SetBool, '~/pause', self._on_pause, qos_profile=SERVICE_QOS)
         self.create_service(Trigger, '~/step', self._on_step, qos_profile=SERVICE_QOS)
+        self._sim_control = SimulationControl(self, self, self.sim_time)   # simulation_interfaces
 
         self.commands = IntakeCounters()
         self._last_command_wall: float | None = None   # time.monotonic() of the last command received
@@ -247,6 +245,10 @@ class Simulator(Node):
     @property
     def lockstep(self) -> bool:
         return self._lockstep
+
+    def sim_time(self) -> float:
+        """Sim time now (s)."""
+        return self._stepper.t
 
     @property
     def joints(self) -> list[str]:
@@ -533,6 +535,22 @@ class Simulator(Node):
         return _Release(lock)
 
     def _on_reset(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        response.success, response.message = self.reset()
+        return response
+
+    def _on_pause(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
+        response.success, response.message = self.set_paused(request.data)
+        return response
+
+    def _on_step(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+        response.success, response.message = self.step()
+        return response
+
+    def reset(self, *, pause: bool = False) -> tuple[bool, str]:
+        """What ``~/reset`` does (and ResetSimulation, SetSimulationState STOPPED with ``pause``): t = 0, the
+        model parameters applied, commands dropped; runs again unless paused (or ``pause``). Returns (success,
+        message); refused, with nothing changed, when the parameters cannot build a model or within
+        :data:`BUSY_TIMEOUT` the lock cannot be had."""
         # The model is built and checked without the lock (new contact tables take ~1 s; the loop keeps
         # ticking meanwhile) and swapped in under it.
         parameters = self._parameter_msgs(self._model_specs)
@@ -541,8 +559,7 @@ class Simulator(Node):
             _check_finite(stepper)
             stepper.applied = self._stepper.applied      # a command applied before the reset stays applied
         except (ParameterError, ValueError, SimulationError) as err:
-            response.success, response.message = False, f'model parameters refused, not reset: {err}'
-            return response
+            return False, f'model parameters refused, not reset: {err}'
         try:
             with self._locked(self._intake.busy), self._locked(self._lock):
                 self._intake.drain()
@@ -557,39 +574,40 @@ class Simulator(Node):
                 self._window = (time.perf_counter(), 0.0, self.states_published)
                 self._publish_parameters()
                 self._publish_state([])
+                self._user_paused = self._user_paused or pause
                 self._set_paused(self._user_paused)
         except Busy as err:
-            response.success, response.message = False, str(err)
-            return response
-        response.success = True
-        response.message = f't = 0, model parameters applied, {"paused" if self._paused else "running"}'
-        return response
+            return False, str(err)
+        return True, f't = 0, model parameters applied, {"paused" if self._paused else "running"}'
 
-    def _on_pause(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
+    def set_paused(self, paused: bool) -> tuple[bool, str]:
+        """What ``~/pause`` does: pause, or run (refused after a failure and in lockstep). (success, message)."""
         try:
             with self._locked(self._lock):
-                if not request.data and self.error:
-                    response.success, response.message = False, f'cannot resume after a failure: {self.error}'
-                elif not request.data and self._lockstep:
-                    response.success = False
-                    response.message = ('lockstep: sim time advances only per ~/step call or command message, '
-                                        'never on the wall clock')
-                else:
-                    self._user_paused = request.data
-                    self._set_paused(request.data)
-                    response.success = True
-                    response.message = f'{"paused" if self._paused else "running"} at t = {self._stepper.t:.9f} s'
+                if not paused and self.error:
+                    return False, f'cannot resume after a failure: {self.error}'
+                if not paused and self._lockstep:
+                    return False, ('lockstep: sim time advances only per ~/step call or command message, '
+                                   'never on the wall clock')
+                self._user_paused = paused
+                self._set_paused(paused)
+                return True, f'{"paused" if self._paused else "running"} at t = {self._stepper.t:.9f} s'
         except Busy as err:
-            response.success, response.message = False, str(err)
-        return response
+            return False, str(err)
 
-    def _on_step(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+    def step(self) -> tuple[bool, str]:
+        """What ``~/step`` does: :meth:`grant_step`, or (False, ``busy: ...``) when a tick holds the lock for
+        longer than :data:`BUSY_TIMEOUT`."""
         try:
             with self._locked(self._intake.busy), self._locked(self._lock):
-                response.success, response.message = self.grant_step()
+                return self.grant_step()
         except Busy as err:
-            response.success, response.message = False, str(err)
-        return response
+            return False, str(err)
+
+    def observe(self) -> Observation:
+        """The state now, as published (taken under the lock, between two ticks); raises :class:`Busy`."""
+        with self._locked(self._lock):
+            return self._stepper.observe()
 
     # -- parameters and diagnostics -----------------------------------------------------------------
 
