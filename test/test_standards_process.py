@@ -1,6 +1,6 @@
 """The ROS standards on the real ``simulator`` executable, as a lab stack's client sees them: simulation_interfaces
-2.0.0 services and the SimulateSteps action. One simulator process (started paused) serves every test of the
-module, in order; each test leaves it paused."""
+2.0.0 services and the SimulateSteps action, and control_msgs' FollowJointTrajectory. One simulator process
+(started paused) serves every test of the module, in order; each test leaves it paused."""
 
 from __future__ import annotations
 
@@ -12,6 +12,7 @@ import pytest
 import rclpy
 from action_msgs.msg import GoalStatus
 from builtin_interfaces.msg import Duration
+from control_msgs.action import FollowJointTrajectory
 from node_helpers import Probe, start_process, stop_process
 from rclpy.action import ActionClient
 from rclpy.context import Context
@@ -219,3 +220,39 @@ def test_simulate_steps_feedback_and_cancel(session: Session) -> None:
     assert all(f.completed_steps + f.remaining_steps == steps for f in feedback)
     assert feedback[-1].remaining_steps > 0
     assert session.state() == SimulationState.STATE_PAUSED
+
+
+def test_follow_joint_trajectory(session: Session) -> None:
+    bad = FollowJointTrajectory.Goal(trajectory=stroke(joint='piezo_7'))
+    handle, _ = session.send_goal(FollowJointTrajectory, 'follow_joint_trajectory', bad)
+    outcome = session.result(handle)
+    assert outcome.status == GoalStatus.STATUS_ABORTED
+    assert outcome.result.error_code == FollowJointTrajectory.Result.INVALID_JOINTS
+    assert 'unknown joints piezo_7' in outcome.result.error_string and 'missing joints piezo_0' in \
+        outcome.result.error_string
+
+    out_of_travel = FollowJointTrajectory.Goal(trajectory=stroke(amplitude=1.0))
+    handle, _ = session.send_goal(FollowJointTrajectory, 'follow_joint_trajectory', out_of_travel)
+    outcome = session.result(handle)
+    assert outcome.result.error_code == FollowJointTrajectory.Result.INVALID_GOAL
+    assert 'piezo limits' in outcome.result.error_string
+
+    # A long goal replaced by a newer one is aborted with joint_trajectory_controller's reason.
+    first, _ = session.send_goal(FollowJointTrajectory, 'follow_joint_trajectory',
+                                 FollowJointTrajectory.Goal(trajectory=stroke(duration=50e-3)))
+    good, feedback = session.send_goal(FollowJointTrajectory, 'follow_joint_trajectory',
+                                       FollowJointTrajectory.Goal(trajectory=stroke()))
+    replaced = session.result(first)
+    assert replaced.status == GoalStatus.STATUS_ABORTED
+    assert replaced.result.error_code == FollowJointTrajectory.Result.INVALID_GOAL
+    assert 'new incoming action' in replaced.result.error_string
+    wait_until(lambda: feedback, 10, executor=session.executor, what='feedback at the goal start')
+    answer = session.call(StepSimulation, 'step_simulation', StepSimulation.Request(steps=2)).result
+    assert answer.result == Result.RESULT_OK, answer.error_message
+    outcome = session.result(good)
+    assert outcome.status == GoalStatus.STATUS_SUCCEEDED, outcome.result.error_string
+    assert outcome.result.error_code == FollowJointTrajectory.Result.SUCCESSFUL
+    assert len(feedback) >= 2 and list(feedback[-1].joint_names) == ['piezo_0']
+    first_t, last_t = (f.header.stamp.sec * 10 ** 9 + f.header.stamp.nanosec for f in (feedback[0], feedback[-1]))
+    assert last_t - first_t == 2 * TICK_NS
+    assert feedback[-1].actual.positions[0] == pytest.approx(feedback[-1].desired.positions[0], abs=1e-12)

@@ -68,7 +68,9 @@ FULL_RESET_SCOPES = (ResetSimulation.Request.SCOPE_DEFAULT, ResetSimulation.Requ
                      ResetSimulation.Request.SCOPE_TIME | ResetSimulation.Request.SCOPE_STATE)
 CUSTOM_INFO = ('micro_feeder simulator: one part, entity part_0 (a point mass; pose and twist in frame feeder, '
                'acceleration not reported). ResetSimulation: SCOPE_DEFAULT, SCOPE_ALL or SCOPE_TIME|SCOPE_STATE '
-               '(time and state together only). A step is the step_period parameter. See docs/interface.md.')
+               '(time and state together only). A step is the step_period parameter. Commands: '
+               'control_msgs/action/FollowJointTrajectory ~/follow_joint_trajectory, actuator/trajectory. '
+               'See docs/interface.md.')
 
 
 class Busy(Exception):

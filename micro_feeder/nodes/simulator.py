@@ -55,12 +55,19 @@ from ..realtime.diagnostics import LoopSnapshot, achieved_rtf, loop_status
 from ..realtime.intake import CommandIntake, IntakeCounters, Outcome, Received, ThrottledLog, plan
 from ..realtime.loop import GIL_SWITCH_INTERVAL, TickLoop
 from ..settings import model_specs
-from ..sim.commands import parse_setpoints, parse_trajectory, parse_trajectory_cdr, start_time
+from ..sim.commands import (
+    TrajectoryCommand,
+    parse_setpoints,
+    parse_trajectory,
+    parse_trajectory_cdr,
+    start_time,
+)
 from ..sim.stepper import Stepper, build_model
 from ._ros import SERVICE_QOS, status_name, topic_qos
 from .parameters import check_changes, declare, values
 from .sim_control import Busy, SimulationControl
 from .spin import NodeRefused, spin_node
+from .trajectory_action import TrajectoryAction
 
 NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
     'publish_rate': (ParamSpec('rate of the loop timer and of the state topics', 'Hz', gt=0, le=10000,
@@ -171,8 +178,10 @@ class Simulator(Node):
         self.create_service(SetBool, '~/pause', self._on_pause, qos_profile=SERVICE_QOS)
         self.create_service(Trigger, '~/step', self._on_step, qos_profile=SERVICE_QOS)
         self._sim_control = SimulationControl(self, self, self.sim_time)   # simulation_interfaces
+        self._trajectory_action = TrajectoryAction(self, self)             # FollowJointTrajectory
 
         self.commands = IntakeCounters()
+        self.command_serial = 0     # +1 for every command applied and every reset: what replaced a goal's strokes
         self._last_command_wall: float | None = None   # time.monotonic() of the last command received
         self._stream_open = False       # the last trajectory applied was a stream's window (stamped, not empty)
         self._refusal_log = ThrottledLog()
@@ -249,6 +258,10 @@ class Simulator(Node):
     def sim_time(self) -> float:
         """Sim time now (s)."""
         return self._stepper.t
+
+    def limits(self) -> tuple[float, float]:
+        """The stroke travel (m) commands must stay in: the piezo limits."""
+        return self._stepper.limits
 
     @property
     def joints(self) -> list[str]:
@@ -482,9 +495,11 @@ class Simulator(Node):
                     self._note_late(command.stamp)
                     self._stepper.command_trajectory(command)
                     self._stream_open = command.stamp > 0.0 and not command.is_stop
+                    self.command_serial += 1
                 else:
                     self._stepper.command_setpoints(command)
                     self._stream_open = False
+                    self.command_serial += 1
             except ValueError as err:
                 self._refuse(str(err))
 
@@ -564,6 +579,7 @@ class Simulator(Node):
             with self._locked(self._intake.busy), self._locked(self._lock):
                 self._intake.drain()
                 self._stepper = stepper
+                self.command_serial += 1
                 self._stream_open = False
                 self._generation += 1
                 self._model_parameters = parameters
@@ -608,6 +624,25 @@ class Simulator(Node):
         """The state now, as published (taken under the lock, between two ticks); raises :class:`Busy`."""
         with self._locked(self._lock):
             return self._stepper.observe()
+
+    def follow(self, command: TrajectoryCommand) -> tuple[int, float]:
+        """Apply a checked trajectory as one received on ``actuator/trajectory`` now would be (a
+        FollowJointTrajectory goal's), after the commands received before it; returns (its
+        :attr:`command_serial`, its start in sim time (s)). Raises :class:`CommandRejected` (the interpolation
+        leaves the travel, a duplicate, a late join that would jump) or :class:`Busy`."""
+        with self._locked(self._intake.busy), self._locked(self._lock):
+            self._intake.drain()
+            start = self._stepper.command_trajectory(command)
+            self._stream_open = False
+            self.command_serial += 1
+            return self.command_serial, start
+
+    def strokes(self, t: float | None = None) -> tuple[np.ndarray, Observation]:
+        """((3, joints) commanded s, ṡ, s̈ at ``t`` (s; default now), the state now), under the lock; raises
+        :class:`Busy`."""
+        with self._locked(self._lock):
+            obs = self._stepper.observe()
+            return self._stepper.schedule.evaluate(obs.t if t is None else t), obs
 
     # -- parameters and diagnostics -----------------------------------------------------------------
 
