@@ -1,6 +1,7 @@
 """The ROS standards on the real ``simulator`` executable, as a lab stack's client sees them: simulation_interfaces
-2.0.0 services and the SimulateSteps action, and control_msgs' FollowJointTrajectory. One simulator process
-(started paused) serves every test of the module, in order; each test leaves it paused."""
+2.0.0 services and the SimulateSteps action, control_msgs' FollowJointTrajectory, and the answer to a refused
+topic command on ``simulator/command_status``. One simulator process (started paused) serves every test of the
+module, in order; each test leaves it paused."""
 
 from __future__ import annotations
 
@@ -31,6 +32,7 @@ from simulation_interfaces.srv import (
     SetSimulationState,
     StepSimulation,
 )
+from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 TICK_NS = 1_000_000      # step_period 1 ms (the default)
@@ -256,3 +258,17 @@ def test_follow_joint_trajectory(session: Session) -> None:
     first_t, last_t = (f.header.stamp.sec * 10 ** 9 + f.header.stamp.nanosec for f in (feedback[0], feedback[-1]))
     assert last_t - first_t == 2 * TICK_NS
     assert feedback[-1].actual.positions[0] == pytest.approx(feedback[-1].desired.positions[0], abs=1e-12)
+
+
+def test_a_refused_topic_command_is_answered_on_command_status(session: Session) -> None:
+    status = session.probe.msgs['simulator/command_status']
+    count = len(status)
+    receipt = session.publish('actuator/trajectory', stroke(joint='bogus', frame_id='client@1:b1'))
+    setpoints = session.publish('actuator/command', Float64MultiArray(data=[math.nan]))
+    wait_until(lambda: len(status) >= count + 2, 10, executor=session.executor, what='two command_status answers')
+    trajectory, command = status[count:count + 2]
+    assert trajectory.header.frame_id == 'actuator/trajectory#client@1:b1' == receipt.frame_id
+    assert trajectory.header.stamp == receipt.stamp
+    assert 'bogus' in trajectory.status[0].message and trajectory.status[0].level == b'\x02'
+    assert command.header.frame_id == 'actuator/command' == setpoints.frame_id
+    assert command.header.stamp == setpoints.stamp and 'non-finite' in command.status[0].message

@@ -171,6 +171,7 @@ class Simulator(Node):
         self._pub_diag = self._publisher(DiagnosticArray, '/diagnostics')
         self._pub_parameters = self._publisher(ParameterEvent, 'simulator/parameters', '~/parameters')
         self._pub_receipts = self._publisher(Header, 'simulator/command_receipts', '~/command_receipts')
+        self._pub_status = self._publisher(DiagnosticArray, 'simulator/command_status', '~/command_status')
         for topic, msg_type in COMMAND_TYPES.items():
             self.create_subscription(msg_type, topic, lambda data, t=topic: self._on_command(t, data),
                                      topic_qos(topic, COMMAND_QUEUE), raw=True)
@@ -461,47 +462,53 @@ class Simulator(Node):
 
     def _process_commands(self, batch: list[Received]) -> None:
         """Plan ``batch`` (parsing outside the lock), then acknowledge and apply it in arrival order
-        between two ticks; in lockstep each command grants its step."""
+        between two ticks; in lockstep each command grants its step. A refusal is answered on
+        ``~/command_status``."""
         generation = self._generation
         outcomes = self._plan(batch)
-        receipts: list[tuple[Received, float]] = []    # published after the lock: a tick waits for it
+        receipts: list[tuple[Received, float, str]] = []    # published after the lock: a tick waits for it
         with self._lock:
             if generation != self._generation:      # a reset changed the model while parsing
                 outcomes = self._plan(batch)
             for outcome in outcomes:
+                t = self._stepper.t
                 if self._lockstep:
-                    self._acknowledge(outcome.received, self._stepper.t)
-                else:
-                    receipts.append((outcome.received, self._stepper.t))
-                self._apply(outcome)
-                if self._lockstep:
+                    self._acknowledge(outcome.received, t)
+                    self._answer(outcome.received, t, self._apply(outcome))
                     self._grant_step()
-        for received, t in receipts:
+                else:
+                    receipts.append((outcome.received, t, self._apply(outcome)))
+        for received, t, refusal in receipts:
             self._acknowledge(received, t)
+            self._answer(received, t, refusal)
         self.commands.dropped = self._intake.dropped if self._intake is not None else 0
 
-    def _apply(self, outcome: Outcome) -> None:
+    def _apply(self, outcome: Outcome) -> str:
+        """Apply (or coalesce, drop, refuse) one command; returns why it was not applied ('' otherwise)."""
         if outcome.coalesced:
             self.commands.coalesced += 1
-        elif outcome.dropped:
-            self._log_refusals(self._refusal_log.note(f'{outcome.received.topic}: dropped unparsed, the command '
-                                                      'queue was full'))
-        elif outcome.refused:
+            return ''
+        if outcome.dropped:
+            reason = f'{outcome.received.topic}: dropped unparsed, the command queue was full'
+            self._log_refusals(self._refusal_log.note(reason))
+            return reason
+        if outcome.refused:
             self._refuse(outcome.refused)
-        else:
-            topic, command = outcome.command
-            try:
-                if topic == 'actuator/trajectory':
-                    self._note_late(command.stamp)
-                    self._stepper.command_trajectory(command)
-                    self._stream_open = command.stamp > 0.0 and not command.is_stop
-                    self.command_serial += 1
-                else:
-                    self._stepper.command_setpoints(command)
-                    self._stream_open = False
-                    self.command_serial += 1
-            except ValueError as err:
-                self._refuse(str(err))
+            return outcome.refused
+        topic, command = outcome.command
+        try:
+            if topic == 'actuator/trajectory':
+                self._note_late(command.stamp)
+                self._stepper.command_trajectory(command)
+                self._stream_open = command.stamp > 0.0 and not command.is_stop
+            else:
+                self._stepper.command_setpoints(command)
+                self._stream_open = False
+        except ValueError as err:
+            self._refuse(str(err))
+            return str(err)
+        self.command_serial += 1
+        return ''
 
     def _note_late(self, stamp: float) -> None:
         """A trajectory stamped before now starts now (joint_trajectory_controller semantics): what it
@@ -529,6 +536,13 @@ class Simulator(Node):
         """``~/command_receipts``: a command arrived on its topic (with its identity, if it has one) and was
         handled at sim time ``t`` (s)."""
         self._pub_receipts.publish(messages.header_bytes(t, receipt_frame(received.topic, received.command_id)))
+
+    def _answer(self, received: Received, t: float, refusal: str) -> None:
+        """``~/command_status``: why the command received at sim time ``t`` (s) was not applied (refusals only)."""
+        if refusal:
+            self._pub_status.publish(messages.command_status(
+                t, receipt_frame(received.topic, received.command_id), status_name(self, 'command'),
+                received.topic, received.command_id, refusal))
 
     def _refuse(self, reason: str) -> None:
         self.commands.refused += 1
