@@ -1,4 +1,5 @@
-"""The simulator's side of ``simulation_interfaces`` (2.0.0): node-private services and the SimulateSteps action.
+"""The simulator's control services: ``simulation_interfaces`` (2.0.0), node-private services and the
+SimulateSteps action, and the project's std_srvs ``~/reset``, ``~/pause``, ``~/step`` as aliases.
 
 The standard simulator-control API that Gazebo, Isaac Sim and O3DE serve, with Gazebo's names relative to the
 node (``/gzserver/step_simulation`` there, ``simulator/step_simulation`` here). Every answer comes from the
@@ -40,6 +41,7 @@ from simulation_interfaces.srv import (
     StepSimulation,
 )
 from std_msgs.msg import Header
+from std_srvs.srv import SetBool, Trigger
 
 from ..interface import stamps
 from ..interface.messages import tilt_quaternion
@@ -157,7 +159,7 @@ class SimulationControl:
             (GetEntitiesStates, 'get_entities_states', self._on_entities_states),
             (GetEntityState, 'get_entity_state', self._on_entity_state),
         ]
-        for srv_type, name, callback in services:
+        for srv_type, name, callback in services + self._aliases():
             node.create_service(srv_type, f'~/{name}', callback, qos_profile=SERVICE_QOS)
         self._action = ActionServer(node, SimulateSteps, '~/simulate_steps', execute_callback=self._execute_steps,
                                     goal_callback=lambda _goal: GoalResponse.ACCEPT,
@@ -176,6 +178,17 @@ class SimulationControl:
         return SimulationState.STATE_PAUSED
 
     # -- services -----------------------------------------------------------------------------------
+
+    def _aliases(self) -> list[tuple[Any, str, Callable[[Any, Any], Any]]]:
+        """The project's own std_srvs services (docs/interface.md), kept as aliases on the same paths."""
+
+        def answer(response: Any, outcome: tuple[bool, str]) -> Any:
+            response.success, response.message = outcome
+            return response
+
+        return [(Trigger, 'reset', lambda _req, res: answer(res, self._sim.reset())),
+                (SetBool, 'pause', lambda req, res: answer(res, self._sim.set_paused(req.data))),
+                (Trigger, 'step', lambda _req, res: answer(res, self._sim.step()))]
 
     def _on_features(self, _request: Any, response: GetSimulatorFeatures.Response) -> GetSimulatorFeatures.Response:
         response.features = SimulatorFeatures(features=FEATURES, spawn_formats=[], custom_info=CUSTOM_INFO)

@@ -18,7 +18,10 @@ parameters can be set at any time and are applied on ``~/reset``; ``real_time_fa
 
 For ``resim`` (:mod:`micro_feeder.sim.resim`) a log must say what the simulator did with each command: the parameters in
 force go out on the latched ``~/parameters`` and every command received, applied or refused, is
-acknowledged on ``~/command_receipts`` with the sim time it was received at.
+acknowledged on ``~/command_receipts`` with the sim time it was received at; a refused one is answered on
+``~/command_status`` with the reason. The control services (std_srvs and simulation_interfaces) live in
+:mod:`.sim_control`, the FollowJointTrajectory action in :mod:`.trajectory_action`; both call this node's
+:meth:`~Simulator.reset`, :meth:`~Simulator.set_paused`, :meth:`~Simulator.step` and :meth:`~Simulator.follow`.
 """
 
 from __future__ import annotations
@@ -42,7 +45,6 @@ from rclpy.task import Future
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, Header, String
-from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
@@ -63,7 +65,7 @@ from ..sim.commands import (
     start_time,
 )
 from ..sim.stepper import Stepper, build_model
-from ._ros import SERVICE_QOS, status_name, topic_qos
+from ._ros import status_name, topic_qos
 from .parameters import check_changes, declare, values
 from .sim_control import Busy, SimulationControl
 from .spin import NodeRefused, spin_node
@@ -175,10 +177,7 @@ class Simulator(Node):
         for topic, msg_type in COMMAND_TYPES.items():
             self.create_subscription(msg_type, topic, lambda data, t=topic: self._on_command(t, data),
                                      topic_qos(topic, COMMAND_QUEUE), raw=True)
-        self.create_service(Trigger, '~/reset', self._on_reset, qos_profile=SERVICE_QOS)
-        self.create_service(SetBool, '~/pause', self._on_pause, qos_profile=SERVICE_QOS)
-        self.create_service(Trigger, '~/step', self._on_step, qos_profile=SERVICE_QOS)
-        self._sim_control = SimulationControl(self, self, self.sim_time)   # simulation_interfaces
+        self._sim_control = SimulationControl(self, self, self.sim_time)   # simulation_interfaces, std_srvs
         self._trajectory_action = TrajectoryAction(self, self)             # FollowJointTrajectory
 
         self.commands = IntakeCounters()
@@ -562,18 +561,6 @@ class Simulator(Node):
             raise Busy(f'busy: one tick has been working for {age:.1f} s (the physics cannot advance in '
                        'bounded time with these parameters); try again or stop the node')
         return _Release(lock)
-
-    def _on_reset(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        response.success, response.message = self.reset()
-        return response
-
-    def _on_pause(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
-        response.success, response.message = self.set_paused(request.data)
-        return response
-
-    def _on_step(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        response.success, response.message = self.step()
-        return response
 
     def reset(self, *, pause: bool = False) -> tuple[bool, str]:
         """What ``~/reset`` does (and ResetSimulation, SetSimulationState STOPPED with ``pause``): t = 0, the
