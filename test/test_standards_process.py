@@ -35,6 +35,8 @@ from simulation_interfaces.srv import (
 from std_msgs.msg import Float64MultiArray
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
+from micro_feeder.nodes._ros import RefusalWatch
+
 TICK_NS = 1_000_000      # step_period 1 ms (the default)
 DEEP = QoSProfile(depth=1000)
 
@@ -263,6 +265,7 @@ def test_follow_joint_trajectory(session: Session) -> None:
 def test_a_refused_topic_command_is_answered_on_command_status(session: Session) -> None:
     status = session.probe.msgs['simulator/command_status']
     count = len(status)
+    watch = RefusalWatch(session.probe, 'client@1:')        # what the actuator and feed controller keep
     receipt = session.publish('actuator/trajectory', stroke(joint='bogus', frame_id='client@1:b1'))
     setpoints = session.publish('actuator/command', Float64MultiArray(data=[math.nan]))
     wait_until(lambda: len(status) >= count + 2, 10, executor=session.executor, what='two command_status answers')
@@ -272,3 +275,5 @@ def test_a_refused_topic_command_is_answered_on_command_status(session: Session)
     assert 'bogus' in trajectory.status[0].message and trajectory.status[0].level == b'\x02'
     assert command.header.frame_id == 'actuator/command' == setpoints.frame_id
     assert command.header.stamp == setpoints.stamp and 'non-finite' in command.status[0].message
+    wait_until(lambda: watch.refused == 1, 5, executor=session.executor, what='the sender-side watch')
+    assert watch.last.startswith('client@1:b1: ') and 'bogus' in watch.last
