@@ -11,7 +11,7 @@ the topic is that the sender learns the outcome:
   ``error_string``. joint_trajectory_controller rejects such goals, and its client never learns why;
 * running: feedback (``header.stamp`` = sim time, ``desired`` = the commanded s, ṡ, s̈, ``actual`` = the
   strokes as they are, ``error`` = desired − actual, ``index`` = the knot last passed), at most every
-  :data:`FEEDBACK_PERIOD` of wall time and once more at the end;
+  :data:`FEEDBACK_PERIOD` of wall time while sim time moves, at the start and once more at the end;
 * done: SUCCEEDED with SUCCESSFUL once sim time has passed the last knot, or ABORTED with
   GOAL_TOLERANCE_VIOLATED when a ``goal_tolerance`` position (m) is not met there (checked at the last knot;
   path tolerances and ``goal_time_tolerance`` are not checked: the ideal actuator follows the command
@@ -128,7 +128,7 @@ class TrajectoryAction:
         knots = base + command.offsets
         end = float(knots[-1]) if knots.size else start
         tolerances = {tol.name: tol.position for tol in request.goal_tolerance if tol.position > 0.0}
-        last_feedback = -np.inf
+        last_feedback, fed_at = -np.inf, None      # wall time (s) and sim time (s) of the last feedback
         while True:
             if goal.is_cancel_requested:
                 try:
@@ -146,8 +146,8 @@ class TrajectoryAction:
                 return Result(error_code=Result.INVALID_GOAL, error_string=f'simulation stopped: {self._sim.error}')
             t = self._sim.sim_time()
             done = t >= end
-            if done or time.monotonic() - last_feedback >= FEEDBACK_PERIOD:
-                last_feedback = time.monotonic()
+            if done or (t != fed_at and time.monotonic() - last_feedback >= FEEDBACK_PERIOD):
+                last_feedback, fed_at = time.monotonic(), t
                 try:
                     verdict = self._feedback(goal, knots, base, min(t, end) if done else None, tolerances)
                 except Busy:
