@@ -4,6 +4,9 @@ VENV ?= .venv
 PYTHON ?= python3
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+INTERFACES := $(VENV)/.interfaces
+INTERFACE_PACKAGES := control_msgs simulation_interfaces
+INTERFACE_SOURCES := $(shell find interfaces -type f)
 OUT ?= out
 
 # All ROS traffic stays on this host unless the caller says otherwise.
@@ -11,7 +14,7 @@ export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 
 .PHONY: test demo lint bench install constraints clean foxglove-client figures performance-doc
 
-install: $(STAMP)
+install: $(STAMP) $(INTERFACES)
 
 $(STAMP): requirements.txt constraints.txt setup.py package.xml
 	test -x $(BIN)/python || $(PYTHON) -m venv $(VENV)
@@ -19,11 +22,18 @@ $(STAMP): requirements.txt constraints.txt setup.py package.xml
 		-c constraints.txt -r requirements.txt -e '.[test]'
 	touch $@
 
-lint: $(STAMP)
+# The standard interface packages that are not on the index (interfaces/: simulation_interfaces 2.0.0,
+# control_msgs' FollowJointTrajectory), generated with rosidl into the venv; rebuilt only when their sources,
+# the script or the venv's packages change (needs cmake and a C/C++ compiler; ~35 s, README).
+$(INTERFACES): $(STAMP) $(INTERFACE_SOURCES) tools/build_interfaces.sh
+	tools/build_interfaces.sh $(VENV) $(VENV)/interfaces-build $(INTERFACE_PACKAGES)
+	touch $@
+
+lint: $(STAMP) $(INTERFACES)
 	$(BIN)/ruff check .
 	$(BIN)/lint-imports --no-cache
 
-test: lint foxglove-client
+test: lint foxglove-client $(INTERFACES)
 	$(BIN)/python -m pytest test -m 'not paths and not slow'
 
 # The real Foxglove WebSocket client the live-view tests use (npm, pinned by package-lock.json; node >= 18).
@@ -36,7 +46,7 @@ $(FOXGLOVE_CLIENT)/node_modules/.installed: $(FOXGLOVE_CLIENT)/package.json $(FO
 
 # The whole pipeline: contact model, an offline stroke and a frequency sweep, the ROS nodes recording a
 # run, a look at the log, its re-simulation, and the feed controller in the loop.
-demo: $(STAMP)
+demo: $(STAMP) $(INTERFACES)
 	rm -rf $(OUT)/run && mkdir -p $(OUT)
 	$(BIN)/micro-feeder contact --plot $(OUT)/contact.png
 	$(BIN)/micro-feeder simulate --out $(OUT) --plot $(OUT)/simulate.png
@@ -66,7 +76,7 @@ figures: $(STAMP)
 	$(BIN)/micro-feeder sweep --set surface.kind=track --set contact.model=coulomb --set landing.law=coulomb --set stroke.waveform=sine --set stroke.count=30 --vary stroke.frequency=50:300:26 --vary stroke.amplitude=10e-6:150e-6:29 --out $(FIG_OUT) --plot $(IMG)/track_map.png
 	$(BIN)/python $(IMG)/nodes_topics.py $(IMG)/nodes_topics.png
 
-bench: $(STAMP) foxglove-client
+bench: $(STAMP) $(INTERFACES) foxglove-client
 	$(BIN)/python -m pip install --quiet --disable-pip-version-check -r bench/requirements-dem.txt
 	for b in bench/bench_*.py; do $(BIN)/python $$b || exit 1; done
 

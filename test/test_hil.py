@@ -7,6 +7,7 @@ recorder and controller as separate processes and kills the controller mid-run.
 from __future__ import annotations
 
 import json
+import re
 import signal
 import subprocess
 import sys
@@ -130,7 +131,12 @@ def recorded_sequences(path: Path) -> dict[str, list[object]]:
 
 def _without_start_time(msg: object) -> object:
     """The simulator's parameter events carry its wall-clock start (``started_at_ns``, which tells a
-    simulator from a twin of its name): the one field two lockstep runs must not share."""
+    simulator from a twin of its name), and a command's identity (``header.frame_id`` of the controller's
+    trajectories and of their receipts, ``/feed_controller@<start>:b1``) the controller's: the fields two
+    lockstep runs must not share."""
+    header = getattr(msg, 'header', msg if hasattr(msg, 'frame_id') else None)
+    if header is not None and '@' in header.frame_id:
+        header.frame_id = re.sub(r'@[0-9a-f]+:', '@<start>:', header.frame_id)
     if hasattr(msg, 'new_parameters'):
         kept = [p for p in msg.new_parameters if p.name != 'started_at_ns']
         assert len(kept) == len(msg.new_parameters) - 1, 'a parameter event without started_at_ns'

@@ -34,6 +34,7 @@ STATE = [
     ('surface/markers', 'visualization_msgs/MarkerArray', 'reliable, volatile, depth 1'),
     ('simulator/parameters', 'rcl_interfaces/ParameterEvent', 'reliable, transient local, depth 1'),
     ('simulator/command_receipts', 'std_msgs/Header', 'reliable, volatile, depth 100'),
+    ('simulator/command_status', 'diagnostic_msgs/DiagnosticArray', 'reliable, volatile, depth 100'),
     ('/clock', 'rosgraph_msgs/Clock', 'best effort, volatile, depth 1'),
     ('/diagnostics', 'diagnostic_msgs/DiagnosticArray', 'reliable, volatile, depth 10'),
 ]
@@ -90,10 +91,9 @@ def draw(out: Path) -> None:
     arrow(ax, (3.85, 3.9 + mid), (4.5, 5.3 + mid))
     # the simulator
     node(ax, 11.1, 5.3 + mid, 3.4, 9.0 + lift, 'simulator',
-         ['checks every command', '(a bad one is refused,', 'counted, logged)',
-                                                '', 'integrates the part', 'on sim time, publishes', 'at 1 kHz', '',
-                                                'services', '~/reset  ~/pause', '~/step', '', 'parameters: every',
-                                                'model parameter', '+ real_time_factor,', 'lockstep, ...'])
+         ['checks every command', '(a bad one is refused,', 'answered, counted)', '', 'integrates the part',
+          'on sim time, publishes', 'at 1 kHz', '', 'simulation_interfaces', 'services, SimulateSteps,',
+          'FollowJointTrajectory;', '~/reset ~/pause ~/step', '', 'parameters: every', 'model parameter, ...'])
     arrow(ax, (9.0, 7.0 + mid), (9.4, 7.0 + mid))
     arrow(ax, (9.0, 5.4 + mid), (9.4, 5.4 + mid))
     # state out, to a bus every subscriber takes from

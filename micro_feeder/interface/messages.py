@@ -13,6 +13,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import Point, PoseStamped, TwistStamped, WrenchStamped
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
@@ -25,7 +26,17 @@ from ..physics.surface import surface_profile
 from . import wire
 from .cdr import ENCAPSULATION, STAMP, put_string
 from .names import CONTACT_FRAME, FEEDER_FRAME
-from .stamps import stamp_parts, to_duration
+from .stamps import stamp_parts, to_duration, to_time
+
+
+def command_status(t: float, frame_id: str, name: str, topic: str, command_id: str, reason: str) -> DiagnosticArray:
+    """``simulator/command_status``: a command refused (or dropped) at sim time ``t`` (s), stamped and framed
+    as its receipt (``frame_id`` = topic[#identity]); one ERROR status ``name``, message = the reason, with
+    the keys ``topic``, ``command_id``, ``t_s`` (the receipt time, a float's repr)."""
+    status = DiagnosticStatus(level=DiagnosticStatus.ERROR, name=name, message=reason, hardware_id='micro_feeder',
+                              values=[KeyValue(key='topic', value=topic), KeyValue(key='command_id', value=command_id),
+                                      KeyValue(key='t_s', value=repr(t))])
+    return DiagnosticArray(header=Header(stamp=to_time(t), frame_id=frame_id), status=[status])
 
 
 def header_bytes(t: float, frame_id: str) -> bytes:

@@ -37,6 +37,7 @@ TOPICS: tuple[TopicSpec, ...] = (
     TopicSpec('surface/markers', 'visualization_msgs/msg/MarkerArray', depth=1),
     TopicSpec('simulator/parameters', 'rcl_interfaces/msg/ParameterEvent', transient_local=True, depth=1),
     TopicSpec('simulator/command_receipts', 'std_msgs/msg/Header', depth=100),
+    TopicSpec('simulator/command_status', 'diagnostic_msgs/msg/DiagnosticArray', depth=100),
     TopicSpec('/clock', 'rosgraph_msgs/msg/Clock', reliable=False, depth=1),
     TopicSpec('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', depth=10),
 )

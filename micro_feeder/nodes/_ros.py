@@ -1,5 +1,5 @@
-"""Helpers shared by the recorder and replay nodes: message classes by name, QoS conversions, and the
-main-thread spin loop that stops on SIGINT/SIGTERM.
+"""Helpers shared by the nodes: message classes by name, QoS conversions, the main-thread spin loop that stops
+on SIGINT/SIGTERM, and a command sender's watch of the simulator's refusals.
 
 Why a custom spin loop: ``rclpy.experimental.EventsExecutor`` (needed to keep up with several kHz of
 messages: ~10k msg/s received against ~3k for ``SingleThreadedExecutor.spin()``, which lost a third of a
@@ -16,10 +16,12 @@ import signal
 from collections.abc import Callable
 from typing import Any
 
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.executors import Executor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 
+from ..interface.names import split_receipt_frame
 from ..interface.topics import TOPICS_BY_NAME
 from ..logs.metadata import qos_profile
 
@@ -105,3 +107,24 @@ def topic_qos(name: str, min_depth: int = 0) -> QoSProfile:
 # Services: requests queued deep enough for bursts (200 asynchronous ~/step calls all answered; the
 # rclpy default keeps 10 and silently drops the rest). Clients sending bursts need the same depth.
 SERVICE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+
+
+class RefusalWatch:
+    """A command sender's view of ``simulator/command_status``: the simulator's refusals of the commands whose
+    identity (``header.frame_id``) starts with ``prefix``, counted, the last reason kept, and logged on
+    ``node``'s logger (throttled: one line per 5 s at most)."""
+
+    def __init__(self, node: Any, prefix: str):
+        self._node, self._prefix = node, prefix
+        self.refused = 0
+        self.last = ''
+        node.create_subscription(DiagnosticArray, 'simulator/command_status', self._on_status,
+                                 topic_qos('simulator/command_status'))
+
+    def _on_status(self, msg: Any) -> None:
+        _topic, command_id = split_receipt_frame(msg.header.frame_id)
+        if not command_id.startswith(self._prefix):
+            return
+        self.refused += 1
+        self.last = f'{command_id}: {msg.status[0].message if msg.status else ""}'
+        self._node.get_logger().warning(f'the simulator refused {self.last}', throttle_duration_sec=5.0)

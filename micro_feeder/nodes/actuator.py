@@ -43,7 +43,7 @@ from ..physics.parameters import ParamSpec
 from ..physics.waveforms import StrokeParams
 from ..settings import model_specs
 from ..sim.stream import StrokeStream, encode_stop, encode_window, points_per_message, sample_waveform
-from ._ros import topic_qos
+from ._ros import RefusalWatch, topic_qos
 from .parameters import check_changes, declare, values
 from .spin import spin_node
 
@@ -90,6 +90,7 @@ class Actuator(Node):
         self._stream: StrokeStream | None = None
         self._pending_stream = False                 # streamed start waiting for the first sim time
         self._instance = f'{self.get_fully_qualified_name()}@{time.time_ns():x}'   # names this run's commands
+        self.refusals = RefusalWatch(self, self._instance + ':')   # the simulator's answers to them
         self._windows_in_burst = 0
         self._graph_seen: frozenset[bytes] | None = None   # the trajectory subscriptions seen ready, and since when
         self._graph_since = 0.0
@@ -312,7 +313,8 @@ class Actuator(Node):
     def _publish_diagnostics(self) -> None:
         items = {'state': self.state(), 'bursts_sent': self.bursts, 'stops_sent': self.stops,
                  'windows_sent': self.windows, 'stream_underruns': self.underruns, 'stream_rephases': self.rephases,
-                 'streaming': self._stream is not None, 'subscribers': self._pub.get_subscription_count()}
+                 'streaming': self._stream is not None, 'subscribers': self._pub.get_subscription_count(),
+                 'commands_refused': self.refusals.refused, 'last_refusal': self.refusals.last}
         status = DiagnosticStatus(name=f'{self.get_name()}: stroke', hardware_id='micro_feeder',
                                   level=DiagnosticStatus.WARN if self.rephases else DiagnosticStatus.OK,
                                   message=items['state'],

@@ -40,7 +40,7 @@ from ..physics.parameters import ParamSpec
 from ..physics.waveforms import StrokeParams
 from ..settings import model_specs
 from ..sim.stream import sample_waveform
-from ._ros import status_name, topic_qos
+from ._ros import RefusalWatch, status_name, topic_qos
 from .parameters import declare, values
 from .spin import spin_node
 
@@ -85,6 +85,8 @@ class FeedController(Node):
                                                      topic_qos('actuator/trajectory'))
         self._pub_status = self.create_publisher(String, '~/status', STATUS_QOS)
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', topic_qos('/diagnostics'))
+        self._instance = f'{self.get_fully_qualified_name()}@{time.time_ns():x}'   # names this run's bursts
+        self.refusals = RefusalWatch(self, self._instance + ':')    # the simulator's answers to them
         self.create_subscription(PoseStamped, 'particle/pose', self._on_pose, topic_qos('particle/pose'))
         self.create_subscription(TwistStamped, 'particle/twist', self._on_twist, topic_qos('particle/twist'))
         self._step_client = self.create_client(Trigger, 'simulator/step') if self._lockstep else None
@@ -181,6 +183,7 @@ class FeedController(Node):
         msg = messages.trajectory(joint_names(n), *sample_waveform(stroke, n, self._knots), Time())
         start = t if self._lockstep else t + self._lead + (time.perf_counter() - building)
         msg.header.stamp = stamps.to_time(start)
+        msg.header.frame_id = f'{self._instance}:b{self.commands_sent + 1}'
         self._burst, self._burst_from_x = burst, x
         self._quiet_after = start + stroke.burst_end_s() + self._settle
         self.send(msg)
@@ -219,6 +222,13 @@ class FeedController(Node):
                 'final_error_m': self.goal.target_x - self.last_x}
 
     def status_text(self) -> str:
+        """One line: the outcome, then the simulator's refusals of this controller's bursts, if any."""
+        text = self._outcome_text()
+        if self.refusals.refused:
+            text += f' ({self.refusals.refused} burst(s) refused by the simulator, the last {self.refusals.last})'
+        return text
+
+    def _outcome_text(self) -> str:
         r = self.result()
         if r['reached']:
             return (f"reached: x = {r['final_x_m'] * 1e3:.6f} mm, error {r['final_error_m'] * 1e6:+.3f} um, "
@@ -232,7 +242,9 @@ class FeedController(Node):
                                                                                     DiagnosticStatus.ERROR)
         status = DiagnosticStatus(name=status_name(self, 'feed'), hardware_id='micro_feeder', level=level,
                                   message=self.status_text(),
-                                  values=[KeyValue(key=k, value=str(v)) for k, v in self.result().items()])
+                                  values=[KeyValue(key=k, value=str(v)) for k, v in
+                                          {**self.result(), 'commands_refused': self.refusals.refused,
+                                           'last_refusal': self.refusals.last}.items()])
         self._pub_diag.publish(DiagnosticArray(header=Header(stamp=stamps.to_time(self.last_t)),
                                                status=[status]))
 

@@ -18,7 +18,10 @@ parameters can be set at any time and are applied on ``~/reset``; ``real_time_fa
 
 For ``resim`` (:mod:`micro_feeder.sim.resim`) a log must say what the simulator did with each command: the parameters in
 force go out on the latched ``~/parameters`` and every command received, applied or refused, is
-acknowledged on ``~/command_receipts`` with the sim time it was received at.
+acknowledged on ``~/command_receipts`` with the sim time it was received at; a refused one is answered on
+``~/command_status`` with the reason. The control services (std_srvs and simulation_interfaces) live in
+:mod:`.sim_control`, the FollowJointTrajectory action in :mod:`.trajectory_action`; both call this node's
+:meth:`~Simulator.reset`, :meth:`~Simulator.set_paused`, :meth:`~Simulator.step` and :meth:`~Simulator.follow`.
 """
 
 from __future__ import annotations
@@ -42,7 +45,6 @@ from rclpy.task import Future
 from rosgraph_msgs.msg import Clock as ClockMsg
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray, Header, String
-from std_srvs.srv import SetBool, Trigger
 from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
@@ -50,17 +52,25 @@ from ..interface import messages, stamps, wire
 from ..interface.names import joint_names, receipt_frame
 from ..interface.parts_messages import PartsMessages
 from ..interface.transitions import TransitionEncoder
-from ..physics.dynamics import Event, SimulationError
+from ..physics.dynamics import Event, Observation, SimulationError
 from ..physics.parameters import ParameterError, ParamSpec
 from ..realtime.diagnostics import LoopSnapshot, achieved_rtf, loop_status
 from ..realtime.intake import CommandIntake, IntakeCounters, Outcome, Received, ThrottledLog, plan
 from ..realtime.loop import GIL_SWITCH_INTERVAL, TickLoop
 from ..settings import model_specs
-from ..sim.commands import parse_setpoints, parse_trajectory, parse_trajectory_cdr, start_time
+from ..sim.commands import (
+    TrajectoryCommand,
+    parse_setpoints,
+    parse_trajectory,
+    parse_trajectory_cdr,
+    start_time,
+)
 from ..sim.stepper import Stepper, build_model
-from ._ros import SERVICE_QOS, status_name, topic_qos
+from ._ros import status_name, topic_qos
 from .parameters import check_changes, declare, values
+from .sim_control import Busy, SimulationControl
 from .spin import NodeRefused, spin_node
+from .trajectory_action import TrajectoryAction
 
 NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
     'publish_rate': (ParamSpec('rate of the loop timer and of the state topics', 'Hz', gt=0, le=10000,
@@ -103,10 +113,6 @@ class DuplicateSimulator(NodeRefused):
 
 
 DUPLICATE_DISCOVERY_S = 0.5   # s after the node is created that the graph is watched for an older simulator
-
-
-class Busy(Exception):
-    """The simulator's lock could not be taken in time: a tick (or a large command) is still working."""
 
 
 class Simulator(Node):
@@ -171,14 +177,15 @@ class Simulator(Node):
         self._pub_diag = self._publisher(DiagnosticArray, '/diagnostics')
         self._pub_parameters = self._publisher(ParameterEvent, 'simulator/parameters', '~/parameters')
         self._pub_receipts = self._publisher(Header, 'simulator/command_receipts', '~/command_receipts')
+        self._pub_status = self._publisher(DiagnosticArray, 'simulator/command_status', '~/command_status')
         for topic, msg_type in COMMAND_TYPES.items():
             self.create_subscription(msg_type, topic, lambda data, t=topic: self._on_command(t, data),
                                      topic_qos(topic, COMMAND_QUEUE), raw=True)
-        self.create_service(Trigger, '~/reset', self._on_reset, qos_profile=SERVICE_QOS)
-        self.create_service(SetBool, '~/pause', self._on_pause, qos_profile=SERVICE_QOS)
-        self.create_service(Trigger, '~/step', self._on_step, qos_profile=SERVICE_QOS)
+        self._sim_control = SimulationControl(self, self, self.sim_time)   # simulation_interfaces, std_srvs
+        self._trajectory_action = TrajectoryAction(self, self)             # FollowJointTrajectory
 
         self.commands = IntakeCounters()
+        self.command_serial = 0     # +1 for every command applied and every reset: what replaced a goal's strokes
         self._last_command_wall: float | None = None   # time.monotonic() of the last command received
         self._stream_open = False       # the last trajectory applied was a stream's window (stamped, not empty)
         self._refusal_log = ThrottledLog()
@@ -251,6 +258,14 @@ class Simulator(Node):
     @property
     def lockstep(self) -> bool:
         return self._lockstep
+
+    def sim_time(self) -> float:
+        """Sim time now (s)."""
+        return self._stepper.t
+
+    def limits(self) -> tuple[float, float]:
+        """The stroke travel (m) commands must stay in: the piezo limits."""
+        return self._stepper.limits
 
     @property
     def joints(self) -> list[str]:
@@ -463,45 +478,53 @@ class Simulator(Node):
 
     def _process_commands(self, batch: list[Received]) -> None:
         """Plan ``batch`` (parsing outside the lock), then acknowledge and apply it in arrival order
-        between two ticks; in lockstep each command grants its step."""
+        between two ticks; in lockstep each command grants its step. A refusal is answered on
+        ``~/command_status``."""
         generation = self._generation
         outcomes = self._plan(batch)
-        receipts: list[tuple[Received, float]] = []    # published after the lock: a tick waits for it
+        receipts: list[tuple[Received, float, str]] = []    # published after the lock: a tick waits for it
         with self._lock:
             if generation != self._generation:      # a reset changed the model while parsing
                 outcomes = self._plan(batch)
             for outcome in outcomes:
+                t = self._stepper.t
                 if self._lockstep:
-                    self._acknowledge(outcome.received, self._stepper.t)
-                else:
-                    receipts.append((outcome.received, self._stepper.t))
-                self._apply(outcome)
-                if self._lockstep:
+                    self._acknowledge(outcome.received, t)
+                    self._answer(outcome.received, t, self._apply(outcome))
                     self._grant_step()
-        for received, t in receipts:
+                else:
+                    receipts.append((outcome.received, t, self._apply(outcome)))
+        for received, t, refusal in receipts:
             self._acknowledge(received, t)
+            self._answer(received, t, refusal)
         self.commands.dropped = self._intake.dropped if self._intake is not None else 0
 
-    def _apply(self, outcome: Outcome) -> None:
+    def _apply(self, outcome: Outcome) -> str:
+        """Apply (or coalesce, drop, refuse) one command; returns why it was not applied ('' otherwise)."""
         if outcome.coalesced:
             self.commands.coalesced += 1
-        elif outcome.dropped:
-            self._log_refusals(self._refusal_log.note(f'{outcome.received.topic}: dropped unparsed, the command '
-                                                      'queue was full'))
-        elif outcome.refused:
+            return ''
+        if outcome.dropped:
+            reason = f'{outcome.received.topic}: dropped unparsed, the command queue was full'
+            self._log_refusals(self._refusal_log.note(reason))
+            return reason
+        if outcome.refused:
             self._refuse(outcome.refused)
-        else:
-            topic, command = outcome.command
-            try:
-                if topic == 'actuator/trajectory':
-                    self._note_late(command.stamp)
-                    self._stepper.command_trajectory(command)
-                    self._stream_open = command.stamp > 0.0 and not command.is_stop
-                else:
-                    self._stepper.command_setpoints(command)
-                    self._stream_open = False
-            except ValueError as err:
-                self._refuse(str(err))
+            return outcome.refused
+        topic, command = outcome.command
+        try:
+            if topic == 'actuator/trajectory':
+                self._note_late(command.stamp)
+                self._stepper.command_trajectory(command)
+                self._stream_open = command.stamp > 0.0 and not command.is_stop
+            else:
+                self._stepper.command_setpoints(command)
+                self._stream_open = False
+        except ValueError as err:
+            self._refuse(str(err))
+            return str(err)
+        self.command_serial += 1
+        return ''
 
     def _note_late(self, stamp: float) -> None:
         """A trajectory stamped before now starts now (joint_trajectory_controller semantics): what it
@@ -530,6 +553,13 @@ class Simulator(Node):
         handled at sim time ``t`` (s)."""
         self._pub_receipts.publish(messages.header_bytes(t, receipt_frame(received.topic, received.command_id)))
 
+    def _answer(self, received: Received, t: float, refusal: str) -> None:
+        """``~/command_status``: why the command received at sim time ``t`` (s) was not applied (refusals only)."""
+        if refusal:
+            self._pub_status.publish(messages.command_status(
+                t, receipt_frame(received.topic, received.command_id), status_name(self, 'command'),
+                received.topic, received.command_id, refusal))
+
     def _refuse(self, reason: str) -> None:
         self.commands.refused += 1
         self.commands.last_refusal = reason
@@ -549,7 +579,11 @@ class Simulator(Node):
                        'bounded time with these parameters); try again or stop the node')
         return _Release(lock)
 
-    def _on_reset(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+    def reset(self, *, pause: bool = False) -> tuple[bool, str]:
+        """What ``~/reset`` does (and ResetSimulation, SetSimulationState STOPPED with ``pause``): t = 0, the
+        model parameters applied, commands dropped; runs again unless paused (or ``pause``). Returns (success,
+        message); refused, with nothing changed, when the parameters cannot build a model or within
+        :data:`BUSY_TIMEOUT` the lock cannot be had."""
         # The model is built and checked without the lock (new contact tables take ~1 s; the loop keeps
         # ticking meanwhile) and swapped in under it.
         parameters = self._parameter_msgs(self._model_specs)
@@ -558,12 +592,12 @@ class Simulator(Node):
             _check_finite(stepper)
             stepper.applied = self._stepper.applied      # a command applied before the reset stays applied
         except (ParameterError, ValueError, SimulationError) as err:
-            response.success, response.message = False, f'model parameters refused, not reset: {err}'
-            return response
+            return False, f'model parameters refused, not reset: {err}'
         try:
             with self._locked(self._intake.busy), self._locked(self._lock):
                 self._intake.drain()
                 self._stepper = stepper
+                self.command_serial += 1
                 self._stream_open = False
                 self._generation += 1
                 self._model_parameters = parameters
@@ -574,39 +608,59 @@ class Simulator(Node):
                 self._window = (time.perf_counter(), 0.0, self.states_published)
                 self._publish_parameters()
                 self._publish_state([])
+                self._user_paused = self._user_paused or pause
                 self._set_paused(self._user_paused)
         except Busy as err:
-            response.success, response.message = False, str(err)
-            return response
-        response.success = True
-        response.message = f't = 0, model parameters applied, {"paused" if self._paused else "running"}'
-        return response
+            return False, str(err)
+        return True, f't = 0, model parameters applied, {"paused" if self._paused else "running"}'
 
-    def _on_pause(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
+    def set_paused(self, paused: bool) -> tuple[bool, str]:
+        """What ``~/pause`` does: pause, or run (refused after a failure and in lockstep). (success, message)."""
         try:
             with self._locked(self._lock):
-                if not request.data and self.error:
-                    response.success, response.message = False, f'cannot resume after a failure: {self.error}'
-                elif not request.data and self._lockstep:
-                    response.success = False
-                    response.message = ('lockstep: sim time advances only per ~/step call or command message, '
-                                        'never on the wall clock')
-                else:
-                    self._user_paused = request.data
-                    self._set_paused(request.data)
-                    response.success = True
-                    response.message = f'{"paused" if self._paused else "running"} at t = {self._stepper.t:.9f} s'
+                if not paused and self.error:
+                    return False, f'cannot resume after a failure: {self.error}'
+                if not paused and self._lockstep:
+                    return False, ('lockstep: sim time advances only per ~/step call or command message, '
+                                   'never on the wall clock')
+                self._user_paused = paused
+                self._set_paused(paused)
+                return True, f'{"paused" if self._paused else "running"} at t = {self._stepper.t:.9f} s'
         except Busy as err:
-            response.success, response.message = False, str(err)
-        return response
+            return False, str(err)
 
-    def _on_step(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
+    def step(self) -> tuple[bool, str]:
+        """What ``~/step`` does: :meth:`grant_step`, or (False, ``busy: ...``) when a tick holds the lock for
+        longer than :data:`BUSY_TIMEOUT`."""
         try:
             with self._locked(self._intake.busy), self._locked(self._lock):
-                response.success, response.message = self.grant_step()
+                return self.grant_step()
         except Busy as err:
-            response.success, response.message = False, str(err)
-        return response
+            return False, str(err)
+
+    def observe(self) -> Observation:
+        """The state now, as published (taken under the lock, between two ticks); raises :class:`Busy`."""
+        with self._locked(self._lock):
+            return self._stepper.observe()
+
+    def follow(self, command: TrajectoryCommand) -> tuple[int, float]:
+        """Apply a checked trajectory as one received on ``actuator/trajectory`` now would be (a
+        FollowJointTrajectory goal's), after the commands received before it; returns (its
+        :attr:`command_serial`, its start in sim time (s)). Raises :class:`CommandRejected` (the interpolation
+        leaves the travel, a duplicate, a late join that would jump) or :class:`Busy`."""
+        with self._locked(self._intake.busy), self._locked(self._lock):
+            self._intake.drain()
+            start = self._stepper.command_trajectory(command)
+            self._stream_open = False
+            self.command_serial += 1
+            return self.command_serial, start
+
+    def strokes(self, t: float | None = None) -> tuple[np.ndarray, Observation]:
+        """((3, joints) commanded s, ṡ, s̈ at ``t`` (s; default now), the state now), under the lock; raises
+        :class:`Busy`."""
+        with self._locked(self._lock):
+            obs = self._stepper.observe()
+            return self._stepper.schedule.evaluate(obs.t if t is None else t), obs
 
     # -- parameters and diagnostics -----------------------------------------------------------------
 
