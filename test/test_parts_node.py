@@ -112,3 +112,30 @@ def test_a_recorded_run_of_several_parts_resimulates_every_part_bit_for_bit(ros_
     assert main(['plot', str(tmp_path / 'log'), '-o', str(tmp_path / 'run.png')]) == 0
     assert (tmp_path / 'run_parts.png').stat().st_size > 10_000
 
+
+
+def test_every_part_is_an_entity_of_simulation_interfaces(parts_rig: Rig) -> None:
+    """GetEntities lists part_0 … part_2; GetEntitiesStates gives each its pose (as particles/poses); a name
+    filter and GetEntityState pick one; an unknown part is RESULT_NOT_FOUND."""
+    from simulation_interfaces.msg import Result
+    from simulation_interfaces.srv import GetEntities, GetEntitiesStates, GetEntityState
+
+    rig = parts_rig
+    rig.wait(lambda: rig.probe.msgs['particle/contact_state'], 'latched initial contact state')
+    rig.send_trajectory(burst_message(stamp=0.0))
+    rig.step(5)
+    entities = rig.probe.call(rig.executor, GetEntities, 'simulator/get_entities')
+    assert entities.result.result == Result.RESULT_OK and entities.entities == ['part_0', 'part_1', 'part_2']
+    states = rig.probe.call(rig.executor, GetEntitiesStates, 'simulator/get_entities_states')
+    poses = rig.probe.msgs['particles/poses'][-1]
+    assert [s.pose.position.x for s in states.states] == [p.position.x for p in poses.poses]
+    request = GetEntitiesStates.Request()
+    request.filters.filter = '^part_[12]$'
+    assert rig.probe.call(rig.executor, GetEntitiesStates, 'simulator/get_entities_states',
+                          request).entities == ['part_1', 'part_2']
+    one = rig.probe.call(rig.executor, GetEntityState, 'simulator/get_entity_state',
+                         GetEntityState.Request(entity='part_2'))
+    assert one.result.result == Result.RESULT_OK and one.state.pose.position.x == poses.poses[2].position.x
+    missing = rig.probe.call(rig.executor, GetEntityState, 'simulator/get_entity_state',
+                             GetEntityState.Request(entity='part_3'))
+    assert missing.result.result == Result.RESULT_NOT_FOUND

@@ -68,6 +68,10 @@ class Session:
         """(goal handle, the feedback list that fills while it runs)."""
         client = ActionClient(self.probe, action_type, f'simulator/{name}', feedback_sub_qos_profile=DEEP)
         wait_until(client.server_is_ready, 10, executor=self.executor, what=f'action server {name}')
+        # server_is_ready looks at the action's services only: feedback published before this client's
+        # feedback subscription is discovered is lost (volatile), so wait for the server's feedback publisher
+        wait_until(lambda: self.probe.count_publishers(f'/simulator/{name}/_action/feedback') > 0, 10,
+                   executor=self.executor, what=f'{name} feedback publisher discovered')
         feedback: list = []
         future = client.send_goal_async(goal, feedback_callback=lambda msg: feedback.append(msg.feedback))
         wait_until(future.done, 10, executor=self.executor, what=f'{name} goal response')

@@ -49,7 +49,7 @@ from ..interface.names import FEEDER_FRAME
 from ..physics.dynamics import Observation
 from ._ros import SERVICE_QOS
 
-PART_ENTITY = 'part_0'          # the part's entity name (one part; part_1 ... when there are several)
+PART_ENTITY = 'part_{}'         # the parts' entity names, by index along the feeder: part_0, part_1, ...
 # Feedback comes every step: a deep history, so a client with the same depth misses none (default depth 10)
 FEEDBACK_QOS = QoSProfile(depth=1000)
 MAX_SERVICE_STEPS = 10_000      # StepSimulation steps per call: the service holds the executor while it steps
@@ -68,7 +68,8 @@ FEATURES = [
 # state this simulator can be in. Nothing is ever spawned, so SCOPE_SPAWNED has nothing to act on.
 FULL_RESET_SCOPES = (ResetSimulation.Request.SCOPE_DEFAULT, ResetSimulation.Request.SCOPE_ALL,
                      ResetSimulation.Request.SCOPE_TIME | ResetSimulation.Request.SCOPE_STATE)
-CUSTOM_INFO = ('micro_feeder simulator: one part, entity part_0 (a point mass; pose and twist in frame feeder, '
+CUSTOM_INFO = ('micro_feeder simulator: entities part_0, part_1, ... (one per particle.x0 entry, in order along the '
+               'feeder; point masses; pose and twist in frame feeder, '
                'acceleration not reported). ResetSimulation: SCOPE_DEFAULT, SCOPE_ALL or SCOPE_TIME|SCOPE_STATE '
                '(time and state together only). A step is the step_period parameter. Commands: '
                'control_msgs/action/FollowJointTrajectory ~/follow_joint_trajectory, actuator/trajectory. '
@@ -91,7 +92,7 @@ class ControlledSimulator(Protocol):
 
     def step(self) -> tuple[bool, str]: ...
 
-    def observe(self) -> Observation: ...
+    def observe_parts(self) -> list[Observation]: ...
 
 
 def result(code: int, message: str = '') -> Result:
@@ -110,31 +111,32 @@ def entity_state(obs: Observation) -> EntityState:
     return state
 
 
-def match_entities(filters: EntityFilters, obs: Callable[[], Observation]) -> tuple[Result, list[str]]:
-    """The entities ``filters`` select: a name regular expression (searched, Python's syntax, which reads
-    POSIX extended expressions of names alike) and sphere bounds (the part's position inside). Categories,
-    tags, box and convex-hull bounds are not supported."""
+def match_entities(filters: EntityFilters, observe: Callable[[], list[Observation]]
+                   ) -> tuple[Result, list[str], list[Observation]]:
+    """The entities ``filters`` select, with their states: a name regular expression (searched, Python's
+    syntax, which reads POSIX extended expressions of names alike) and sphere bounds (the part's position
+    inside). Categories, tags, box and convex-hull bounds are not supported."""
     if filters.categories:
         return result(Result.RESULT_FEATURE_UNSUPPORTED, 'entity categories are not supported (no '
-                      'ENTITY_CATEGORIES feature)'), []
+                      'ENTITY_CATEGORIES feature)'), [], []
     if filters.tags.tags:
         return result(Result.RESULT_FEATURE_UNSUPPORTED, 'entity tags are not supported (no ENTITY_TAGS '
-                      'feature)'), []
-    try:
-        names = [name for name in (PART_ENTITY,) if re.search(filters.filter, name)]
-    except re.error as err:
-        return result(Result.RESULT_OPERATION_FAILED, f'filter {filters.filter!r}: {err}'), []
+                      'feature)'), [], []
     bounds = filters.bounds
-    if bounds.type == Bounds.TYPE_SPHERE and names:
-        if len(bounds.points) < 2:
-            return result(Result.RESULT_OPERATION_FAILED, 'sphere bounds need 2 points: centre, (radius, 0, 0)'), []
-        c, state = bounds.points[0], obs()
-        if math.dist((state.x, 0.0, state.z), (c.x, c.y, c.z)) > bounds.points[1].x:
-            names = []
-    elif bounds.type != Bounds.TYPE_EMPTY:
+    if bounds.type not in (Bounds.TYPE_EMPTY, Bounds.TYPE_SPHERE):
         return result(Result.RESULT_FEATURE_UNSUPPORTED, f'bounds of type {bounds.type}: only TYPE_EMPTY and '
-                      'TYPE_SPHERE are supported'), []
-    return result(Result.RESULT_OK), names
+                      'TYPE_SPHERE are supported'), [], []
+    if bounds.type == Bounds.TYPE_SPHERE and len(bounds.points) < 2:
+        return result(Result.RESULT_OPERATION_FAILED, 'sphere bounds need 2 points: centre, (radius, 0, 0)'), [], []
+    parts = observe()
+    try:
+        chosen = [k for k in range(len(parts)) if re.search(filters.filter, PART_ENTITY.format(k))]
+    except re.error as err:
+        return result(Result.RESULT_OPERATION_FAILED, f'filter {filters.filter!r}: {err}'), [], []
+    if bounds.type == Bounds.TYPE_SPHERE:
+        c, radius = bounds.points[0], bounds.points[1].x
+        chosen = [k for k in chosen if math.dist((parts[k].x, 0.0, parts[k].z), (c.x, c.y, c.z)) <= radius]
+    return result(Result.RESULT_OK), [PART_ENTITY.format(k) for k in chosen], [parts[k] for k in chosen]
 
 
 class SimulationControl:
@@ -257,12 +259,12 @@ class SimulationControl:
         response.result = result(Result.RESULT_OK if ok else Result.RESULT_OPERATION_FAILED, message)
         return response
 
-    def _observe(self) -> Observation:
-        return self._sim.observe()
+    def _observe(self) -> list[Observation]:
+        return self._sim.observe_parts()
 
     def _on_entities(self, request: GetEntities.Request, response: GetEntities.Response) -> GetEntities.Response:
         try:
-            response.result, response.entities = match_entities(request.filters, self._observe)
+            response.result, response.entities, _ = match_entities(request.filters, self._observe)
         except Busy as err:
             response.result = result(Result.RESULT_OPERATION_FAILED, str(err))
         return response
@@ -270,20 +272,23 @@ class SimulationControl:
     def _on_entities_states(self, request: GetEntitiesStates.Request,
                             response: GetEntitiesStates.Response) -> GetEntitiesStates.Response:
         try:
-            response.result, names = match_entities(request.filters, self._observe)
-            if names:
-                response.entities, response.states = names, [entity_state(self._observe())]
+            response.result, names, parts = match_entities(request.filters, self._observe)
+            response.entities, response.states = names, [entity_state(obs) for obs in parts]
         except Busy as err:
             response.result = result(Result.RESULT_OPERATION_FAILED, str(err))
         return response
 
     def _on_entity_state(self, request: GetEntityState.Request,
                          response: GetEntityState.Response) -> GetEntityState.Response:
-        if request.entity != PART_ENTITY:
-            response.result = result(Result.RESULT_NOT_FOUND, f'no entity {request.entity!r} (entities: {PART_ENTITY})')
-            return response
         try:
-            response.state = entity_state(self._observe())
+            parts = self._observe()
+            names = [PART_ENTITY.format(k) for k in range(len(parts))]
+            if request.entity not in names:
+                response.result = result(Result.RESULT_NOT_FOUND, f'no entity {request.entity!r} (entities: '
+                                         f'{names[0]} ... {names[-1]})' if len(names) > 1 else
+                                         f'no entity {request.entity!r} (entities: {names[0]})')
+                return response
+            response.state = entity_state(parts[names.index(request.entity)])
             response.result = result(Result.RESULT_OK)
         except Busy as err:
             response.result = result(Result.RESULT_OPERATION_FAILED, str(err))

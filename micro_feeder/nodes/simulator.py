@@ -639,9 +639,14 @@ class Simulator(Node):
             return False, str(err)
 
     def observe(self) -> Observation:
-        """The state now, as published (taken under the lock, between two ticks); raises :class:`Busy`."""
+        """Part 0's state now, as published (taken under the lock, between two ticks); raises :class:`Busy`."""
         with self._locked(self._lock):
             return self._stepper.observe()
+
+    def observe_parts(self) -> list[Observation]:
+        """Every part's state now, in part order (as :meth:`observe`)."""
+        with self._locked(self._lock):
+            return self._stepper.observe_parts()
 
     def follow(self, command: TrajectoryCommand) -> tuple[int, float]:
         """Apply a checked trajectory as one received on ``actuator/trajectory`` now would be (a
