@@ -392,6 +392,7 @@ def parts_scenarios(draw: st.DrawFn) -> dict[str, object]:
     return {**draw(scenarios()), 'piezo.enabled': False, **parts}
 
 
+@pytest.mark.timeout(300 + 2 * PARTS_EXAMPLES)    # ~1 s an example on 2 shared cores; 300 s is for one test
 @settings(max_examples=PARTS_EXAMPLES, derandomize=True, deadline=None, database=None,
           suppress_health_check=HEALTH)
 @given(scenario=parts_scenarios())
