@@ -8,6 +8,7 @@ import json
 import math
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -89,25 +90,12 @@ def run(args: argparse.Namespace) -> int:
     summary = {**result.summary(), 'wall_time_s': time.perf_counter() - started}
     if args.gate is not None:
         summary.update(gate_figures(result['t'], result['x'], args.gate))
-    out = Path(args.out)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        csv_path = write_csv(result, out / 'simulate.csv')
-        plot_path = None
-        if args.plot is not None:
-            from ..plots.dynamics import plot_history
-            plot_path = plot_history(result, Path(args.plot) if args.plot else out / 'simulate.png',
-                                     title=describe(model))
-    except OSError as err:
-        raise CommandError(f'cannot write to {err.filename}: {err.strerror}') from err
-    if args.json:
-        json.dump(summary, sys.stdout)
-        print()
-        return 0
-    print(describe(model))
-    print(format_summary(summary))
-    print(f'time series written to {csv_path}' + (f', plot to {plot_path}' if plot_path else ''))
-    return 0
+
+    def plot(path: Path) -> Path:
+        from ..plots.dynamics import plot_history
+        return plot_history(result, path, title=describe(model))
+
+    return report(args, model, summary, format_summary, lambda path: write_csv(result, path), plot, 'time series')
 
 
 def run_parts(args: argparse.Namespace, model: FeederModel) -> int:
@@ -120,15 +108,27 @@ def run_parts(args: argparse.Namespace, model: FeederModel) -> int:
     except SimulationError as err:
         raise CommandError(str(err)) from err
     summary = {**run_figures(result, args.gate), 'wall_time_s': time.perf_counter() - started}
+
+    def plot(path: Path) -> Path:
+        from ..plots.parts import plot_space_time
+        return plot_space_time(result, path, title=describe(model), gate=args.gate, size=model.particle.size)
+
+    return report(args, model, summary, format_parts_summary, lambda path: write_parts_csv(result, path), plot,
+                  'positions')
+
+
+def report(args: argparse.Namespace, model: FeederModel, summary: dict[str, Any],
+           format_figures: Callable[[dict[str, Any]], str], write: Callable[[Path], Path],
+           plot: Callable[[Path], Path], written: str) -> int:
+    """The end of ``simulate``: ``write`` the CSV into ``--out`` (``simulate.csv``), ``plot`` with --plot
+    (``simulate.png`` there unless a path is given), then the summary as JSON (``--json``) or as text
+    (``format_figures``) with where the ``written`` data went. A file that cannot be written is one clear
+    error."""
     out = Path(args.out)
     try:
         out.mkdir(parents=True, exist_ok=True)
-        csv_path = write_parts_csv(result, out / 'simulate.csv')
-        plot_path = None
-        if args.plot is not None:
-            from ..plots.parts import plot_space_time
-            plot_path = plot_space_time(result, Path(args.plot) if args.plot else out / 'simulate.png',
-                                        title=describe(model), gate=args.gate, size=model.particle.size)
+        csv_path = write(out / 'simulate.csv')
+        plot_path = plot(Path(args.plot) if args.plot else out / 'simulate.png') if args.plot is not None else None
     except OSError as err:
         raise CommandError(f'cannot write to {err.filename}: {err.strerror}') from err
     if args.json:
@@ -136,8 +136,8 @@ def run_parts(args: argparse.Namespace, model: FeederModel) -> int:
         print()
         return 0
     print(describe(model))
-    print(format_parts_summary(summary))
-    print(f'positions written to {csv_path}' + (f', plot to {plot_path}' if plot_path else ''))
+    print(format_figures(summary))
+    print(f'{written} written to {csv_path}' + (f', plot to {plot_path}' if plot_path else ''))
     return 0
 
 
