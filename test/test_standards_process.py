@@ -6,6 +6,7 @@ module, in order; each test leaves it paused."""
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Iterator
 from typing import Any
 
@@ -14,10 +15,13 @@ import rclpy
 from action_msgs.msg import GoalStatus
 from builtin_interfaces.msg import Duration
 from control_msgs.action import FollowJointTrajectory
+from control_msgs.msg import JointTolerance
 from node_helpers import Probe, start_process, stop_process
+from rcl_interfaces.srv import SetParameters
 from rclpy.action import ActionClient
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
 from ros_helpers import wait_until
 from simulation_interfaces.action import SimulateSteps
@@ -281,3 +285,50 @@ def test_a_refused_topic_command_is_answered_on_command_status(session: Session)
     assert command.header.stamp == setpoints.stamp and 'non-finite' in command.status[0].message
     wait_until(lambda: watch.refused == 1, 5, executor=session.executor, what='the sender-side watch')
     assert watch.last.startswith('client@1:b1: ') and 'bogus' in watch.last
+
+
+def _set_model(session: Session, **values: float | bool) -> None:
+    """Set model parameters on the simulator and reset, which applies them (docs/interface.md)."""
+    params = [Parameter(name, value=value).to_parameter_msg() for name, value in values.items()]
+    answer = session.call(SetParameters, 'set_parameters', SetParameters.Request(parameters=params))
+    assert all(r.successful for r in answer.results), answer.results
+    reset = session.call(ResetSimulation, 'reset_simulation',
+                         ResetSimulation.Request(scope=ResetSimulation.Request.SCOPE_DEFAULT)).result
+    assert reset.result == Result.RESULT_OK, reset.error_message
+
+
+def test_follow_joint_trajectory_tolerances_with_a_lagging_piezo(session: Session) -> None:
+    """A slow, lightly damped stack (200 Hz, ζ 0.05: it rings for ~0.1 s) lags the stroke by micrometres: a
+    1 nm path tolerance aborts with PATH_TOLERANCE_VIOLATED; a 10 nm goal tolerance is missed at the last
+    knot (GOAL_TOLERANCE_VIOLATED with goal_time_tolerance 0) and met once the ringing has died down within a
+    goal_time_tolerance of 0.3 s (SUCCESSFUL)."""
+    _set_model(session, **{'piezo.enabled': True, 'piezo.natural_frequency': 200.0, 'piezo.damping': 0.05})
+    codes = FollowJointTrajectory.Result
+    try:
+        path = FollowJointTrajectory.Goal(trajectory=stroke(duration=20e-3),
+                                          path_tolerance=[JointTolerance(name='piezo_0', position=1e-9)])
+        handle, feedback = session.send_goal(FollowJointTrajectory, 'follow_joint_trajectory', path)
+        wait_until(lambda: feedback, 10, executor=session.executor, what='feedback at the goal start')
+        session.call(StepSimulation, 'step_simulation', StepSimulation.Request(steps=5))
+        outcome = session.result(handle)
+        assert outcome.result.error_code == codes.PATH_TOLERANCE_VIOLATED, outcome.result.error_string
+        assert 'piezo_0' in outcome.result.error_string and 'tolerance 1e-09 m' in outcome.result.error_string
+
+        for grace_s, code in ((0.0, codes.GOAL_TOLERANCE_VIOLATED), (0.3, codes.SUCCESSFUL)):
+            goal = FollowJointTrajectory.Goal(trajectory=stroke(duration=5e-3),
+                                              goal_tolerance=[JointTolerance(name='piezo_0', position=1e-8)],
+                                              goal_time_tolerance=Duration(nanosec=round(grace_s * 1e9)))
+            handle, feedback = session.send_goal(FollowJointTrajectory, 'follow_joint_trajectory', goal)
+            wait_until(lambda f=feedback: f, 10, executor=session.executor, what='feedback at the goal start')
+            for _ in range(40):                   # 10 ms of sim time at a time, until the goal has an answer
+                session.call(StepSimulation, 'step_simulation', StepSimulation.Request(steps=10))
+                future = handle.get_result_async()
+                end = time.monotonic() + 0.5
+                while not future.done() and time.monotonic() < end:
+                    session.executor.spin_once(timeout_sec=0.01)
+                if future.done():
+                    break
+            outcome = session.result(handle)
+            assert outcome.result.error_code == code, (grace_s, outcome.result.error_string)
+    finally:
+        _set_model(session, **{'piezo.enabled': False, 'piezo.natural_frequency': 50e3, 'piezo.damping': 0.7})

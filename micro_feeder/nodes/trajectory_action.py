@@ -12,10 +12,14 @@ the topic is that the sender learns the outcome:
 * running: feedback (``header.stamp`` = sim time, ``desired`` = the commanded s, ṡ, s̈, ``actual`` = the
   strokes as they are, ``error`` = desired − actual, ``index`` = the knot last passed), at most every
   :data:`FEEDBACK_PERIOD` of wall time while sim time moves, at the start and once more at the end;
-* done: SUCCEEDED with SUCCESSFUL once sim time has passed the last knot, or ABORTED with
-  GOAL_TOLERANCE_VIOLATED when a ``goal_tolerance`` position (m) is not met there (checked at the last knot;
-  path tolerances and ``goal_time_tolerance`` are not checked: the ideal actuator follows the command
-  exactly);
+* ``path_tolerance`` (position m, velocity m/s per joint; > 0 checks, 0 and −1 none, as
+  joint_trajectory_controller without default tolerances): checked at every feedback while the goal runs
+  (sampled, not between feedbacks); a miss aborts with PATH_TOLERANCE_VIOLATED and the strokes hold where
+  they are. The ideal actuator follows the command exactly; with ``piezo.enabled`` the stack lags it;
+* done: SUCCEEDED with SUCCESSFUL once sim time has passed the last knot and every ``goal_tolerance``
+  (position, velocity) is met, checked from the last knot on for up to ``goal_time_tolerance`` of sim time
+  (0: at the last knot only); ABORTED with GOAL_TOLERANCE_VIOLATED, naming the joints, when it is still not
+  met then;
 * replaced by a newer goal, a topic command or a reset: ABORTED with INVALID_GOAL and
   joint_trajectory_controller's "Current goal cancelled due to new incoming action." (it sets such a goal
   canceled, a transition rclpy's goal handle does not offer from executing);
@@ -127,17 +131,16 @@ class TrajectoryAction:
         base = start if command.stamp == 0.0 else command.stamp
         knots = base + command.offsets
         end = float(knots[-1]) if knots.size else start
-        tolerances = {tol.name: tol.position for tol in request.goal_tolerance if tol.position > 0.0}
+        path_tolerances = tolerance_table(request.path_tolerance)
+        goal_tolerances = tolerance_table(request.goal_tolerance)
+        give_up = end + max(stamps.seconds(request.goal_time_tolerance), 0.0)   # sim time the goal must be met by
         last_feedback, fed_at = -np.inf, None      # wall time (s) and sim time (s) of the last feedback
         while True:
             if goal.is_cancel_requested:
-                try:
-                    self._sim.follow(TrajectoryCommand(0.0, np.zeros(0), np.zeros((0, len(joints))), None, None))
-                except (Busy, ValueError) as err:
-                    goal.canceled()
-                    return Result(error_code=Result.SUCCESSFUL, error_string=f'canceled; the strokes not held: {err}')
+                not_held = self._hold()
                 goal.canceled()
-                return Result(error_code=Result.SUCCESSFUL, error_string='canceled: the strokes hold where they are')
+                return Result(error_code=Result.SUCCESSFUL, error_string=f'canceled; the strokes not held: {not_held}'
+                              if not_held else 'canceled: the strokes hold where they are')
             if self._sim.command_serial != serial:
                 goal.abort()
                 return Result(error_code=Result.INVALID_GOAL, error_string=PREEMPTED)
@@ -149,21 +152,42 @@ class TrajectoryAction:
             if done or (t != fed_at and time.monotonic() - last_feedback >= FEEDBACK_PERIOD):
                 last_feedback, fed_at = time.monotonic(), t
                 try:
-                    verdict = self._feedback(goal, knots, base, min(t, end) if done else None, tolerances)
+                    error = self._feedback(goal, knots, base, min(t, end) if done else None)
                 except Busy:
-                    verdict = None
-                if done and verdict is not None:
-                    if verdict:
+                    error = None
+                if error is not None and not done:
+                    miss = tolerance_misses(self._sim.joints, path_tolerances, error)
+                    if miss:
+                        not_held = self._hold()
+                        miss += f' (the strokes not held: {not_held})' if not_held else ''
                         goal.abort()
-                        return Result(error_code=Result.GOAL_TOLERANCE_VIOLATED, error_string=verdict)
-                    goal.succeed()
-                    return Result(error_code=Result.SUCCESSFUL)
+                        return Result(error_code=Result.PATH_TOLERANCE_VIOLATED,
+                                      error_string=f'at t = {error[2]:.9f} s: {miss}')
+                if done and error is not None:
+                    miss = tolerance_misses(self._sim.joints, goal_tolerances, error)
+                    if not miss:
+                        goal.succeed()
+                        return Result(error_code=Result.SUCCESSFUL)
+                    if t >= give_up:
+                        goal.abort()
+                        return Result(error_code=Result.GOAL_TOLERANCE_VIOLATED,
+                                      error_string=f'at t = {error[2]:.9f} s: {miss}')
             self._wake.wait(TURN_WAIT)
             await Yield()
 
-    def _feedback(self, goal: ServerGoalHandle, knots: np.ndarray, base: float, t: float | None,
-                  tolerances: dict[str, float]) -> str | None:
-        """Publish the goal's feedback now; returns the goal-tolerance verdict ('' = met, else why)."""
+    def _hold(self) -> str:
+        """Hold the strokes where they are (an empty trajectory: the topic's stop); '' when the simulator took
+        it, else why not."""
+        try:
+            self._sim.follow(TrajectoryCommand(0.0, np.zeros(0), np.zeros((0, len(self._sim.joints))), None, None))
+        except (Busy, ValueError) as err:
+            return str(err)
+        return ''
+
+    def _feedback(self, goal: ServerGoalHandle, knots: np.ndarray, base: float,
+                  t: float | None) -> tuple[np.ndarray, np.ndarray, float]:
+        """Publish the goal's feedback now; returns its error: position (m) and velocity (m/s) per joint,
+        desired − actual, and the sim time (s) of the state."""
         desired, obs = self._sim.strokes(t)
         actual = np.vstack([obs.strokes, obs.stroke_velocities])
         joints = self._sim.joints
@@ -173,7 +197,24 @@ class TrajectoryAction:
             error=point(desired[:2] - actual, obs.t - base),
             index=max(int(np.searchsorted(knots, obs.t, side='right')) - 1, 0))
         goal.publish_feedback(feedback)
-        misses = [f'{name}: {abs(desired[0, k] - obs.strokes[k]):.3g} m from the goal, tolerance {tolerances[name]:g} m'
-                  for k, name in enumerate(joints)
-                  if name in tolerances and abs(desired[0, k] - obs.strokes[k]) > tolerances[name]]
-        return '; '.join(misses)
+        return desired[0] - actual[0], desired[1] - actual[1], obs.t
+
+
+def tolerance_table(tolerances: Any) -> dict[str, tuple[float, float]]:
+    """{joint: (position m, velocity m/s)} of a sequence of control_msgs/JointTolerance: a value > 0 is a
+    tolerance, 0 (the controller's default: none here) and −1 (none) are not."""
+    return {tol.name: (tol.position, tol.velocity) for tol in tolerances if tol.position > 0.0 or tol.velocity > 0.0}
+
+
+def tolerance_misses(joints: list[str], tolerances: dict[str, tuple[float, float]],
+                     error: tuple[np.ndarray, np.ndarray, float]) -> str:
+    """'' when every joint's error (position m, velocity m/s per joint, in ``joints`` order) is within its
+    tolerance, else which joints miss, by how much."""
+    misses = []
+    for k, name in enumerate(joints):
+        position, velocity = tolerances.get(name, (0.0, 0.0))
+        if position > 0.0 and abs(error[0][k]) > position:
+            misses.append(f'{name} {abs(error[0][k]):.3g} m from the trajectory, tolerance {position:g} m')
+        if velocity > 0.0 and abs(error[1][k]) > velocity:
+            misses.append(f'{name} {abs(error[1][k]):.3g} m/s from the trajectory, tolerance {velocity:g} m/s')
+    return '; '.join(misses)
