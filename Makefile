@@ -73,6 +73,7 @@ figures: $(STAMP)
 	$(BIN)/micro-feeder run --duration 0.1 --set stroke.count=5 --real-time-factor 0.05 --record $(FIG_OUT)/run
 	$(BIN)/micro-feeder plot $(FIG_OUT)/run -o $(IMG)/run.png
 	$(BIN)/python docs/img/track_landing_laws.py $(IMG)/track_landing_laws.png
+	$(BIN)/python docs/img/travelling_wave_thickness.py $(IMG)/travelling_wave_thickness.png
 	$(BIN)/micro-feeder sweep --set surface.kind=track --set contact.model=coulomb --set landing.law=coulomb --set stroke.waveform=sine --set stroke.count=30 --vary stroke.frequency=50:300:26 --vary stroke.amplitude=10e-6:150e-6:29 --out $(FIG_OUT) --plot $(IMG)/track_map.png
 	$(BIN)/python $(IMG)/nodes_topics.py $(IMG)/nodes_topics.png
 

@@ -52,6 +52,10 @@ class SurfaceParams(ParameterGroup):
                           min_length=1, ge=1e-7, le=1.0)
     cutoff: float = param(1e-12, 'relative cutoff: an actuator is skipped where its bump is below this '
                           'fraction of its peak (0: exact full sum)', ge=0.0, le=1e-3)
+    thickness: float = param(0.0, 'plate thickness t: the top surface of a bending plate also moves along the '
+                             'feeder, u_x = -(t/2) dh/dx at each material point, which carries a part stuck on '
+                             "it (0: the seed's surface, whose points move vertically only; bumps only)", 'm',
+                             ge=0.0, le=0.1)
     kind: str = param('bumps', "'bumps': a flexible surface pushed up by the actuators (centers, widths); "
                       "'track': a rigid vibratory track moving as one body along track.vibration_angle, its "
                       'displacement the stroke (one actuator)', choices=SURFACE_KINDS)
@@ -61,6 +65,10 @@ class SurfaceParams(ParameterGroup):
         if len(self.widths) != len(self.centers):
             raise ParameterError('surface.widths', list(self.widths),
                                  f'one width per actuator ({len(self.centers)} surface.centers)')
+        if self.kind == 'track' and self.thickness > 0.0:
+            raise ParameterError('surface.thickness', self.thickness,
+                                 "0 with a rigid track (surface.kind 'track' moves as one body; thickness is a "
+                                 'bending plate\'s)')
         if self.kind == 'track' and len(self.centers) > 2:
             raise ParameterError('surface.centers', list(self.centers),
                                  "a track (surface.kind 'track') moves as one body: one actuator (track.drive "

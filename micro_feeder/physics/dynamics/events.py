@@ -10,7 +10,12 @@ import numpy as np
 from .._jit import jit, jit_inline
 from ..waveforms import channel_bounds
 from .layout import (
+    AUX_H,
+    AUX_HT,
+    AUX_HX,
     AUX_L,
+    AUX_MAT_VX,
+    AUX_MAT_VZ,
     AUX_N,
     AUX_QMAX,
     AUX_ROOT_SLOPE,
@@ -37,7 +42,7 @@ from .layout import (
     TAKE_OFF,
     KernelModel,
 )
-from .rhs import contact_load, evaluate, felt_range, sign, strokes_at, surface_here
+from .rhs import contact_load, evaluate, felt_range, material_load, sign, strokes_at, surface_here
 from .steppers import dopri5_dense, hermite, interpolant_reach
 
 
@@ -204,7 +209,7 @@ def adhesion_floor(mode: int, t: float, h: float, y0: np.ndarray, f0: np.ndarray
     |g|, |g'| w, |g''| w² are at most 1, e^(−1/2), 1, and V bounds |ẋ| on the interpolant. Felt: within
     the cutoff of any x the interpolant reaches. A floor above 0 proves that the margin has no dip to find.
     """
-    if mode == FLYING or model.piezo or model.has_base or model.track:
+    if mode == FLYING or model.piezo or model.has_base or model.track or model.half_thickness > 0.0:
         return -math.inf
     reach = interpolant_reach(0, h, y0, f0, y1, f1, work, dense)
     speed = abs(y0[1]) + interpolant_reach(1, h, y0, f0, y1, f1, work, dense) if model.convective else 0.0
@@ -335,7 +340,10 @@ def bounce_flight(rebound: float, x: float, xd: float, st: np.ndarray, base_acc:
     the surface falls away faster than the part). Successive bounces on a surface that moves little during
     them lose a factor e_n each, so their flights fall below ``bounce_min_flight`` after finitely many, and
     the last landing is plastic: chatter ends in finite time (at most the first flight / (1 − e_n) in all)."""
-    contact_load(x, xd, st, base_acc, model, aux)
+    if model.half_thickness > 0.0:
+        material_load(x, xd, False, st, base_acc, model, aux)
+    else:
+        contact_load(x, xd, st, base_acc, model, aux)
     pressing = aux[AUX_N] * aux[AUX_L] / model.mass
     return 2.0 * rebound / pressing if pressing > 0.0 else math.inf
 
@@ -348,16 +356,24 @@ def transition(which: int, t: float, y: np.ndarray, model: KernelModel, src: tup
     mode = iv[IV_MODE]
     base_acc = strokes_at(t, y, model, src, cur, st, aux, 0.0)
     if mode == FLYING:                                     # landing: landing.law, landing.restitution
-        h, hx, _hxx, ht, _htt, _hxt = surface_here(y[0], st, model, aux)
+        if model.half_thickness > 0.0:                     # the surface's material moves along x too
+            material_load(y[0], 0.0, True, st, base_acc, model, aux)
+            h, hx, ht, vx = aux[AUX_H], aux[AUX_HX], aux[AUX_HT], aux[AUX_MAT_VX]
+            vz = aux[AUX_MAT_VZ] if model.landing_relative else 0.0
+            vx = vx if model.landing_relative else 0.0
+        else:
+            h, hx, _hxx, ht, _htt, _hxt = surface_here(y[0], st, model, aux)
+            vx, vz = 0.0, ht if model.landing_relative else 0.0
         length = math.sqrt(1.0 + hx * hx)
         approach = abs(y[3] - ht - hx * y[1]) / length     # normal velocity relative to the surface (m/s)
-        surface_vz = ht if model.landing_relative else 0.0
-        xd = (y[1] + hx * (y[3] - surface_vz)) / (1.0 + hx * hx)
+        xd = vx + ((y[1] - vx) + hx * (y[3] - vz)) / (1.0 + hx * hx)
+        slip = xd - (aux[AUX_MAT_VX] if model.half_thickness > 0.0 else 0.0)   # relative to the material
         if model.landing_law == LANDING_STICK:
-            xd = 0.0
+            slip = 0.0
         elif model.landing_law == LANDING_COULOMB:     # |Δv_t| ≤ μ |Δv_n|, Δv_n = (1 + e_n)·approach
             impulse = (1.0 + model.restitution) * approach
-            xd = sign(xd) * max(abs(xd) - model.landing_mu * impulse / length, 0.0)
+            slip = sign(slip) * max(abs(slip) - model.landing_mu * impulse / length, 0.0)
+        xd = slip + (aux[AUX_MAT_VX] if model.half_thickness > 0.0 else 0.0)
         rebound = model.restitution * approach
         if rebound > 0.0 and bounce_flight(rebound, y[0], xd, st, base_acc, model, aux) >= model.bounce_min_flight:
             y[1] = xd - hx * rebound / length              # tangential xd·L along the surface, rebound along n
@@ -371,19 +387,27 @@ def transition(which: int, t: float, y: np.ndarray, model: KernelModel, src: tup
         y[1] = xd
         y[2] = 0.0
         y[3] = 0.0
-        iv[IV_DIR] = sign(xd)
+        iv[IV_DIR] = sign(slip)
         iv[IV_FRESH] = 0
-        enter(iv, fs, t, SLIDING if xd != 0.0 else STUCK, IV_LANDING, grazing)
+        enter(iv, fs, t, SLIDING if slip != 0.0 else STUCK, IV_LANDING, grazing)
         return LANDING
     if which == 1:                                         # take-off with the contact velocity
-        h, hx, _hxx, ht, _htt, _hxt = surface_here(y[0], st, model, aux)
+        if model.half_thickness > 0.0:
+            material_load(y[0], y[1], mode == STUCK, st, base_acc, model, aux)
+            h, hx, ht = aux[AUX_H], aux[AUX_HX], aux[AUX_HT]
+        else:
+            h, hx, _hxx, ht, _htt, _hxt = surface_here(y[0], st, model, aux)
         y[2] = h
         y[3] = ht + hx * y[1]
         iv[IV_FRESH] = 1
         enter(iv, fs, t, FLYING, IV_TAKE_OFF, grazing)
         return TAKE_OFF
-    y[1] = 0.0
-    contact_load(y[0], 0.0, st, base_acc, model, aux)
+    if model.half_thickness > 0.0:                         # at rest on its material point
+        material_load(y[0], 0.0, True, st, base_acc, model, aux)
+        y[1] = aux[AUX_MAT_VX]
+    else:
+        y[1] = 0.0
+        contact_load(y[0], 0.0, st, base_acc, model, aux)
     if mode == STUCK:                                      # friction opposes the impending motion
         iv[IV_DIR] = -sign(aux[AUX_T_REQ])
         iv[IV_FRESH] = 1

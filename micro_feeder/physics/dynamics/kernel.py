@@ -64,7 +64,18 @@ from .layout import (
     STUCK,
     KernelModel,
 )
-from .rhs import copy_into, evaluate, finite, interp, locate_all, margin_slopes, strokes_at, surface_here, wave_step
+from .rhs import (
+    copy_into,
+    evaluate,
+    finite,
+    interp,
+    locate_all,
+    margin_slopes,
+    material_load,
+    strokes_at,
+    surface_here,
+    wave_step,
+)
 from .steppers import dopri5_dense, dopri5_error, dopri5_step, rk4_step
 
 
@@ -85,7 +96,11 @@ def observe(t: float, y: np.ndarray, iv: np.ndarray, model: KernelModel, src: tu
     for k in range(model.n_actuators):
         row[N_FIXED_COLUMNS + k] = st[0, k]
     if mode == FLYING:
-        h, _hx, _hxx, ht, _htt, _hxt = surface_here(y[0], st, model, aux)
+        if model.half_thickness > 0.0:          # the surface as a graph over x, under the part
+            material_load(y[0], 0.0, True, st, 0.0, model, aux)
+            h, ht = aux[AUX_H], aux[AUX_HT]
+        else:
+            h, _hx, _hxx, ht, _htt, _hxt = surface_here(y[0], st, model, aux)
         row[C_Z] = y[2]
         row[C_ZD] = y[3]
         row[C_FRICTION] = 0.0
@@ -125,7 +140,8 @@ def report_at(t_target: float, t0: float, y: np.ndarray, iv: np.ndarray, model: 
     of the run's own method (no error control: it is shorter than the step the control accepted). With
     ``model.record`` its output row goes to ``rec[n_rec]``; returns the rows used."""
     mode, direction = iv[IV_MODE], iv[IV_DIR]
-    if mode != STUCK or model.piezo:            # stuck: nothing moves relative to the surface
+    # stuck, nothing moves relative to the surface; with surface.thickness the part moves with its material
+    if mode != STUCK or model.piezo or model.half_thickness > 0.0:
         f0, out = scratch[6], scratch[8]
         evaluate(mode, direction, t0, y, model, src, cur, st, aux, f0)
         if model.adaptive and not model.threshold:
@@ -240,7 +256,7 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
                 which = 0
         if which < 0:
             direction = iv[IV_DIR]
-            moving = mode != STUCK or model.piezo
+            moving = mode != STUCK or model.piezo or model.half_thickness > 0.0
             error_control = adaptive and moving     # Dormand-Prince; else RK4, or stuck checks
             if error_control:
                 h = min(fs[FS_H], dt, t_next - t, t_limit - t)

@@ -16,7 +16,8 @@ Data passed around the kernel (all SI):
 * ``aux``: quantities of the last right-hand-side evaluation, indexed by ``AUX_*``.
 
 Every mode has two *margins*, positive while the mode lasts; an event is a margin reaching 0:
-stuck: Q_max − |T_req| and N_det + F_po; sliding: dir·ẋ and N_det + F_po; flying: the gap δ.
+stuck: Q_max − |T_req| and N_det + F_po; sliding: dir·ẋ (with surface.thickness: dir·dX/dt, the slip relative
+to the surface's material) and N_det + F_po; flying: the gap δ.
 """
 
 from __future__ import annotations
@@ -52,6 +53,7 @@ class KernelModel(NamedTuple):
     slope_acc: float            # track: g sin α, gravity along the track (m/s², 0 for bumps)
     landing_mu: float           # landing law coulomb: μ of the tangential impulse
     restitution: float          # normal restitution e_n at a landing (0: plastic)
+    half_thickness: float       # surface.thickness / 2 (m): the top surface moves along x by u = −(t/2) ∂h/∂x
     bounce_min_flight: float    # s: a bounce whose flight would be shorter is plastic (chatter ends)
     adaptive: bool              # DOPRI5 (else fixed-step RK4)
     threshold: bool             # the seed's threshold-velocity friction logic (else exact events)
@@ -100,7 +102,11 @@ N_SCRATCH = 11
 (AUX_N, AUX_T_REQ, AUX_QMAX, AUX_L, AUX_H, AUX_HX, AUX_HT, AUX_GAP, AUX_XS, AUX_LOAD_INDEX,
  AUX_ROOT_SLOPE, AUX_FELT_LO, AUX_FELT_HI, AUX_JET) = range(14)
 AUX_T_RATE = AUX_JET + 7
-N_AUX = AUX_JET + 8
+# with surface.thickness (``rhs.material_load``): the material point X under the part, its velocity along x
+# (m/s) and z, the part's slip rate dX/dt relative to it, 1 + ∂u/∂X, |∂P/∂X| and the acceleration along x
+# (m/s²) the motion at that slip rate has before friction acts
+AUX_MAT_X, AUX_MAT_VX, AUX_MAT_VZ, AUX_SLIP, AUX_STRETCH, AUX_ARC, AUX_MAT_AX = range(AUX_JET + 8, AUX_JET + 15)
+N_AUX = AUX_JET + 15
 
 # Columns of a recorded row (then one stroke column per actuator).
 (C_T, C_MODE, C_X, C_Z, C_XD, C_ZD, C_THETA, C_N, C_FRICTION, C_QMAX, C_SEPARATION, C_GAP, C_H,

@@ -227,6 +227,8 @@ class FeederModel:
                                  f"track.drive '{self.track.drive}' moves the track with "
                                  f"{2 if self.track.drive == 'two_way' else 1} actuator(s): give that many centres "
                                  '(and widths, and stroke.phases)')
+        if surface.thickness > 0.0:
+            self._check_thickness()
         alpha, beta = self.track.inclination, self.track.vibration_angle
         gravity = self.particle.gravity * (math.cos(alpha) if track else 1.0)     # its part normal to the surface
         scalars = dict(
@@ -238,7 +240,7 @@ class FeederModel:
             piezo_max=piezo.stroke_max, lift=math.sin(beta) if track else 0.0,
             shake=math.cos(beta) if track else 0.0,
             slope_acc=self.particle.gravity * math.sin(alpha) if track else 0.0, landing_mu=self.contact.mu,
-            restitution=self.landing.restitution,
+            restitution=self.landing.restitution, half_thickness=0.5 * surface.thickness,
             bounce_min_flight=BOUNCE_MIN_FLIGHT_EVENT_TOLERANCES * integration.event_tolerance)
         flags = dict(
             adaptive=integration.method == 'dopri5', threshold=integration.friction_logic == 'threshold',
@@ -256,6 +258,21 @@ class FeederModel:
             lift_channel=1 if track and self.track.drive == 'two_way' else 0)
         object.__setattr__(self, '_kernel_model', packed)
         object.__setattr__(self, '_recording_model', packed._replace(record=True))
+
+    def _check_thickness(self) -> None:
+        """surface.thickness needs the exact-event dynamics it was built on (docs/dynamics.md §1)."""
+        integration, particle = self.integration, self.particle
+        checks = (('piezo.enabled', self.piezo.enabled, self.piezo.enabled, 'false with surface.thickness > 0 (the '
+                   'stack model and a moving material are not combined)'),
+                  ('integration.friction_logic', integration.friction_logic, integration.friction_logic != 'events',
+                   "'events' with surface.thickness > 0"),
+                  ('integration.convective_terms', integration.convective_terms, not integration.convective_terms,
+                   'true with surface.thickness > 0'),
+                  ('particle.x0', list(particle.start_positions), particle.n_parts > 1,
+                   'one part with surface.thickness > 0 (parts meeting on a moving material are not modelled)'))
+        for name, value, refused, allowed in checks:
+            if refused:
+                raise ParameterError(name, value, allowed)
 
     @classmethod
     def from_settings(cls, flat: Mapping[str, Any], **overrides: Any) -> FeederModel:

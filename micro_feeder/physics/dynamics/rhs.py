@@ -12,6 +12,7 @@ from ..piezo import piezo_acceleration
 from ..surface import surface_at, surface_jet
 from ..waveforms import N_POLY, N_TRIG, channel_value, locate_segment, segment_end
 from .layout import (
+    AUX_ARC,
     AUX_FELT_HI,
     AUX_FELT_LO,
     AUX_GAP,
@@ -21,8 +22,14 @@ from .layout import (
     AUX_JET,
     AUX_L,
     AUX_LOAD_INDEX,
+    AUX_MAT_AX,
+    AUX_MAT_VX,
+    AUX_MAT_VZ,
+    AUX_MAT_X,
     AUX_N,
     AUX_QMAX,
+    AUX_SLIP,
+    AUX_STRETCH,
     AUX_T_RATE,
     AUX_T_REQ,
     AUX_XS,
@@ -188,6 +195,9 @@ def contact_load(x: float, xd: float, st: np.ndarray, base_acc: float, model: Ke
 def closest_point(x: float, z: float, st: np.ndarray, model: KernelModel, aux: np.ndarray) -> None:
     """Closest surface point to (x, z) by Newton on its abscissa x_s; sets AUX_XS, AUX_H, AUX_HX (at
     x_s), AUX_L and AUX_GAP = signed distance along the normal there (> 0 above the surface)."""
+    if model.half_thickness > 0.0:
+        closest_material_point(x, z, st, model, aux)
+        return
     xs = x
     for _ in range(20):
         h, hx, hxx, _ht, _htt, _hxt = surface_here(xs, st, model, aux)
@@ -228,6 +238,8 @@ def evaluate(mode: int, direction: int, t: float, y: np.ndarray, model: KernelMo
         dy[2] = y[3]
         dy[3] = -model.gravity - f_att / (aux[AUX_L] * m)
         return aux[AUX_GAP] + GAP_RESOLUTION * (abs(y[2]) + abs(aux[AUX_H])), math.inf
+    if model.half_thickness > 0.0:
+        return material_evaluate(mode, direction, y, model, st, base_acc, aux, dy)
     contact_load(y[0], y[1], st, base_acc, model, aux)
     n_detach = aux[AUX_N]
     if not model.include_weight:
@@ -254,12 +266,13 @@ def margin_slopes(mode: int, direction: int, y: np.ndarray, dy: np.ndarray, mode
     v = ẋ (0 when stuck), dN/dt = m (dA/dt · L − A · dL/dt) / L² for A = h_tt + 2 h_xt v + h_xx v² + g − h_x a_b,
     dL/dt = h_x (h_xt + h_xx v) / L; dT_req/dt = dN/dt h_x + N (h_xt + h_xx v) + m (dL/dt a_b + L da_b/dt);
     dQ_max/dt = the slope of the Q_max(N) table segment at N times dN/dt; the slide margin's is dir·a. NaN in
-    flight, with the piezo model (the stack's s⃛ is not tracked) and with the threshold friction logic.
+    flight, with the piezo model (the stack's s⃛ is not tracked), with the threshold friction logic and with
+    surface.thickness.
     Stuck, dT_req/dt goes to ``aux[AUX_T_RATE]`` (NaN where there is no closed form): the dip search follows
     the stick margin's two smooth branches Q_max ∓ T_req where T_req changes sign (``events.first_dip``).
     """
     aux[AUX_T_RATE] = math.nan
-    if mode == FLYING or model.piezo or model.threshold:
+    if mode == FLYING or model.piezo or model.threshold or model.half_thickness > 0.0:
         return math.nan, math.nan
     m = model.mass
     v = y[1] if mode != STUCK else 0.0
@@ -293,6 +306,114 @@ def margin_slopes(mode: int, direction: int, y: np.ndarray, dy: np.ndarray, mode
     t_req_rate = n_rate * hx + n * hx_rate + m * (length_rate * base + length * base_rate)
     aux[AUX_T_RATE] = t_req_rate
     return q_rate - (t_req_rate if t_req > 0.0 else -t_req_rate if t_req < 0.0 else abs(t_req_rate)), adhesion_rate
+
+
+# -- surface.thickness: the top surface's material points move along x too (docs/dynamics.md §1) ---------
+
+@jit_inline
+def material_point(x: float, st: np.ndarray, model: KernelModel, aux: np.ndarray) -> float:
+    """The abscissa X (m) of the top surface's material point now at ``x``: x = X + u(X), u = −(t/2) h_X(X)
+    (Kirchhoff plate, t = surface.thickness), by Newton from X = x. One root while (t/2) h_XX < 1 (else the
+    surface would fold over: :func:`material_load` gives NaN)."""
+    c = model.half_thickness
+    first, stop = felt(model, aux)
+    xm = x
+    for _ in range(30):
+        _h, hx, hxx, _ht, _htt, _hxt = surface_at(xm, st[0], st[1], st[2], model.centers, model.widths,
+                                                  model.cutoff_radius, first, stop)
+        step = (xm - c * hx - x) / (1.0 - c * hxx)
+        xm -= step
+        if abs(step) <= 2e-16 * (abs(x) + model.min_width):
+            break
+    return xm
+
+
+@jit_inline
+def material_load(x: float, xd: float, stuck: bool, st: np.ndarray, base_acc: float, model: KernelModel,
+                  aux: np.ndarray) -> None:
+    """:func:`contact_load` for a surface whose material points also move along x (surface.thickness t > 0).
+
+    The top surface is the curve P(X) = (X + u, h) of the material abscissa X, u = −(t/2) h_X. A part on it
+    at x (m), ẋ (m/s) sits on the point X (:func:`material_point`) and slips relative to it at
+    Ẋ = (ẋ − u_t) / (1 + u_X) (0 when ``stuck``). With A = P_tt + 2 P_Xt Ẋ + P_XX Ẋ², J = |P_X|, n and τ the
+    unit normal and tangent, the normal load is N = m n·(A + (a_b, g)), the friction that motion needs
+    T_req = m τ·(A + (a_b, g)), and Ẍ = (T − T_req) / (m J), so ẍ = A_x + (1 + u_X) Ẍ.
+    At t = 0 these are contact_load's. ``aux`` gets N, T_req, Q_max, the surface as a graph over x (height,
+    slope dz/dx, its rate at fixed x, L) and the material quantities (AUX_MAT_*, AUX_SLIP, AUX_STRETCH =
+    1 + u_X, AUX_ARC = J, AUX_MAT_AX = A_x)."""
+    c, m = model.half_thickness, model.mass
+    xm = material_point(x, st, model, aux)
+    first, stop = felt(model, aux)
+    h, hx, hxx, ht, htt, hxt, _httt, hxtt, hxxt, hxxx = surface_jet(
+        xm, st[0], st[1], st[2], st[3], model.centers, model.widths, model.cutoff_radius, first, stop)
+    stretch = 1.0 - c * hxx
+    if stretch <= 0.0:                       # the surface folds over: no material point under the part
+        stretch = math.nan
+    ut, utt, uxt, uxx = -c * hxt, -c * hxtt, -c * hxxt, -c * hxxx
+    slip = 0.0 if stuck else (xd - ut) / stretch
+    ax = utt + 2.0 * uxt * slip + uxx * slip * slip
+    az = htt + 2.0 * hxt * slip + hxx * slip * slip
+    arc = math.sqrt(stretch * stretch + hx * hx)
+    n = m * (stretch * az - hx * ax + stretch * model.gravity - hx * base_acc) / arc
+    slope = hx / stretch
+    aux[AUX_N] = n
+    aux[AUX_T_REQ] = m * (stretch * ax + hx * az + stretch * base_acc + hx * model.gravity) / arc
+    aux[AUX_QMAX] = interp_near(model.load_n, model.q_max_n, n, aux, AUX_LOAD_INDEX)
+    aux[AUX_L] = arc / stretch
+    aux[AUX_H] = h
+    aux[AUX_HX] = slope
+    aux[AUX_HT] = ht - slope * ut
+    aux[AUX_MAT_X], aux[AUX_MAT_VX], aux[AUX_MAT_VZ] = xm, ut, ht
+    aux[AUX_SLIP], aux[AUX_STRETCH], aux[AUX_ARC], aux[AUX_MAT_AX] = slip, stretch, arc, ax
+
+
+@jit_inline
+def material_evaluate(mode: int, direction: int, y: np.ndarray, model: KernelModel, st: np.ndarray,
+                      base_acc: float, aux: np.ndarray, dy: np.ndarray) -> tuple[float, float]:
+    """:func:`evaluate` in contact with surface.thickness: stuck, the part moves with its material point
+    (ẋ = u_t, ẍ = u_tt); sliding, friction opposes the slip Ẋ, whose sign is the slide margin's."""
+    m = model.mass
+    material_load(y[0], y[1], mode == STUCK, st, base_acc, model, aux)
+    n_detach = aux[AUX_N]
+    if not model.include_weight:
+        n_detach -= m * model.gravity * aux[AUX_STRETCH] / aux[AUX_ARC]
+    adhesion_margin = n_detach + model.pull_off
+    if mode == STUCK:
+        dy[0] = aux[AUX_MAT_VX]
+        dy[1] = aux[AUX_MAT_AX]
+        return aux[AUX_QMAX] - abs(aux[AUX_T_REQ]), adhesion_margin
+    slip_acc = (-direction * aux[AUX_QMAX] - aux[AUX_T_REQ]) / (m * aux[AUX_ARC])
+    dy[0] = y[1]
+    dy[1] = aux[AUX_MAT_AX] + aux[AUX_STRETCH] * slip_acc
+    return direction * aux[AUX_SLIP], adhesion_margin
+
+
+@jit
+def closest_material_point(x: float, z: float, st: np.ndarray, model: KernelModel, aux: np.ndarray) -> None:
+    """:func:`closest_point` on the curve P(X) = (X + u, h) of surface.thickness: Newton on (P − p)·P_X = 0
+    over the material abscissa X; the same outputs (the graph's height, slope and L at the point found)."""
+    c = model.half_thickness
+    first, stop = felt(model, aux)
+    xm = x
+    for _ in range(20):
+        h, hx, hxx, _ht, _htt, _hxt, _httt, _hxtt, _hxxt, hxxx = surface_jet(
+            xm, st[0], st[1], st[2], st[3], model.centers, model.widths, model.cutoff_radius, first, stop)
+        px, pz = xm - c * hx - x, h - z
+        tx, tz = 1.0 - c * hxx, hx
+        step = (px * tx + pz * tz) / (tx * tx + tz * tz + px * (-c * hxxx) + pz * hxx)
+        xm -= step
+        if abs(step) <= 1e-15 + 1e-13 * abs(xm):
+            break
+    h, hx, hxx, _ht, _htt, _hxt = surface_at(xm, st[0], st[1], st[2], model.centers, model.widths,
+                                             model.cutoff_radius, first, stop)
+    xs = xm - c * hx
+    slope = hx / (1.0 - c * hxx)
+    length = math.sqrt(1.0 + slope * slope)
+    aux[AUX_XS] = xs
+    aux[AUX_H] = h
+    aux[AUX_HX] = slope
+    aux[AUX_L] = length
+    aux[AUX_GAP] = ((z - h) - slope * (x - xs)) / length
 
 
 @jit
