@@ -91,6 +91,8 @@ def scenarios(draw: st.DrawFn) -> dict[str, object]:
         flat['stroke.samples'] = [0.0] + [draw(st.floats(-0.3, 1.0)) for _ in range(draw(st.integers(3, 7)))]
     if waveform == 'harmonics':
         flat.update(_harmonics(draw))
+    if not flat['piezo.enabled']:   # a bending plate's surface points move along x too (below the fold-over)
+        flat['surface.thickness'] = draw(st.sampled_from([0.0, draw(st.floats(1e-5, 0.6e-3))]))
     return flat
 
 
@@ -313,6 +315,15 @@ FOUND_CASES = [   # found by the property below, fixed
      'surface.widths': [0.0011676552493456412, 0.001441010559542227, 0.0013252422062852997, 0.0005],
      'particle.x0': -0.0015, 'piezo.enabled': False, 'stream.max_points': 2000, 'stream.window': 0.02,
      'stroke.samples': [0.0, 0.0, 0.0, 0.0005, 0.2681199214828744, 0.68359375, 0.521484375, 0.0]},
+    # surface.thickness, a part at a bump's centre barely unstuck where one stroke ends and another starts: the
+    # root search refined the slide margin as dir·ẋ, not dir·Ẋ (the slip relative to the moving material), and
+    # found a reversal every 66 ps without end (the run never finished)
+    {'stroke.waveform': 'raised_cosine', 'stroke.count': 1, 'stroke.amplitude': 2e-05, 'stroke.frequency': 1006.0,
+     'stroke.phases': [0.0, 0.0, 0.0, 1.0, 0.0],
+     'surface.centers': [-0.00235082777089654, -0.00117541388544827, 0.0, 0.00117541388544827, 0.00235082777089654],
+     'surface.widths': [0.0010629381983843114, 0.0005, 0.0011635503230801908, 0.0008515501806361393,
+                        0.0012974073390379136],
+     'particle.x0': 0.0, 'piezo.enabled': False, 'surface.thickness': 0.00032915345963627966},
 ]
 
 
@@ -389,7 +400,7 @@ def parts_scenarios(draw: st.DrawFn) -> dict[str, object]:
              'particle.v0': [draw(st.sampled_from([0.0, draw(st.floats(-0.05, 0.05))])) for _ in range(n)]}
     if draw(st.booleans()):
         return {**draw(track_scenarios()), **parts}
-    return {**draw(scenarios()), 'piezo.enabled': False, **parts}
+    return {**draw(scenarios()), 'piezo.enabled': False, 'surface.thickness': 0.0, **parts}  # neither with parts
 
 
 @pytest.mark.timeout(300 + 2 * PARTS_EXAMPLES)    # ~1 s an example on 2 shared cores; 300 s is for one test

@@ -34,11 +34,11 @@ def main(out: Path) -> None:
     per_stroke = np.array([[evaluate(job, {'surface.thickness': t, 'particle.x0': x0})['distance_m']
                             for x0 in START_M] for t in THICKNESS_M]) * 1e6
     fig, ax = plt.subplots(figsize=(7.5, 4.5), layout='constrained')
-    for k, x0 in enumerate(START_M):
+    for k in range(START_M.size):
         ax.plot(THICKNESS_M * 1e3, per_stroke[:, k], '-', color='0.75', lw=0.8,
                 label='one start position each (0.6 to 1.4 mm)' if k == 0 else None)
     ax.plot(THICKNESS_M * 1e3, np.nanmedian(per_stroke, axis=1), 'o-', color='#1b9e77', label='median over starts')
-    ax.set_yscale('log')
+    ax.set_ylim(bottom=0.0)
     ax.set_xlabel('plate thickness t (mm)')
     ax.set_ylabel('distance in one stroke (µm)')
     ax.set_title('Travelling wave, one stroke: the plate\'s surface points also move along x', fontsize=11)

@@ -45,6 +45,9 @@ from .layout import (
 from .rhs import contact_load, evaluate, felt_range, material_load, sign, strokes_at, surface_here
 from .steppers import dopri5_dense, hermite, interpolant_reach
 
+JUMP_TOLERANCE = 1e-12   # relative (1 + |ẋ| in m/s): a stuck part's velocity and its material point's differ
+                         # by more only after the material's velocity jumped (both are set from one evaluation)
+
 
 @jit
 def locate_root(which: int, mode: int, direction: int, t: float, h: float, y0: np.ndarray,
@@ -78,8 +81,8 @@ def locate_root(which: int, mode: int, direction: int, t: float, h: float, y0: n
             dopri5_dense(theta, h, y0, f0, y1, f1, work, yi)
         else:
             hermite(theta, h, y0, f0, y1, f1, yi)
-        if mode == SLIDING and which == 0:  # the slide margin dir·ẋ needs no force evaluation
-            g = direction * yi[1]
+        if mode == SLIDING and which == 0 and model.half_thickness == 0.0:   # the slide margin dir·ẋ needs
+            g = direction * yi[1]                                               # no force evaluation
         else:
             g = evaluate(mode, direction, t + theta * h, yi, model, src, cur, st, aux, dy)[which]
         if g > 0.0:
@@ -419,6 +422,30 @@ def transition(which: int, t: float, y: np.ndarray, model: KernelModel, src: tup
     iv[IV_DIR] = -sign(aux[AUX_T_REQ])                     # slides back the other way (not counted)
     iv[IV_FRESH] = 1
     return REVERSAL
+
+
+@jit
+def material_jump(mode: int, slide_margin: float, t: float, y: np.ndarray, aux: np.ndarray, iv: np.ndarray,
+                  fs: np.ndarray) -> int:
+    """surface.thickness, where a step starts: whether the material under the part jumped in velocity (a stroke
+    whose velocity jumps: a sine's start and end), per the evaluation just made at (t, y); the event kind, or
+    -1. Friction, finite, gives the part no impulse: its velocity y[1] stays. A stuck part then slides
+    relative to the material (``stick_to_slip``, counted); a sliding one whose slip the jump reversed (its
+    ``slide_margin`` dir·Ẋ < 0 where a step starts: a continuous crossing is located inside the step before)
+    slides back (a ``reversal``). Both paths see it: the exact jump of the analytic strokes here, the
+    trajectory's nanosecond ramp as a friction demand no Q_max meets."""
+    if mode == SLIDING:
+        if iv[IV_FRESH] != 0 or slide_margin >= 0.0:
+            return -1
+        iv[IV_DIR] = -iv[IV_DIR]
+        return REVERSAL
+    jump = y[1] - aux[AUX_MAT_VX]
+    if mode != STUCK or abs(jump) <= JUMP_TOLERANCE * (1.0 + abs(y[1])):
+        return -1
+    iv[IV_DIR] = sign(jump)
+    iv[IV_FRESH] = 0
+    enter(iv, fs, t, SLIDING, IV_STICK_TO_SLIP, False)
+    return STICK_TO_SLIP
 
 
 @jit

@@ -13,12 +13,13 @@ import math
 import numpy as np
 
 from .._jit import jit
-from .events import first_dip, locate_root, threshold_decision, transition
+from .events import first_dip, locate_root, material_jump, threshold_decision, transition
 from .layout import (
     AUX_GAP,
     AUX_H,
     AUX_HT,
     AUX_HX,
+    AUX_MAT_VX,
     AUX_N,
     AUX_QMAX,
     AUX_ROOT_SLOPE,
@@ -149,6 +150,9 @@ def report_at(t_target: float, t0: float, y: np.ndarray, iv: np.ndarray, model: 
         else:
             rk4_step(mode, direction, t0, y, f0, t_target - t0, model, src, cur, st, aux, scratch, out)
         copy_into(y, out)
+        if model.half_thickness > 0.0 and mode == STUCK:     # its material point's velocity, exactly
+            evaluate(mode, direction, t_target, y, model, src, cur, st, aux, scratch[9])
+            y[1] = aux[AUX_MAT_VX]
     if model.record:
         observe(t_target, y, iv, model, src, cur, st, aux, scratch[10], rec[n_rec])
         n_rec += 1
@@ -244,6 +248,13 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
                     n_ev += 1
                     mode = iv[IV_MODE]
             g0, g1 = evaluate(mode, iv[IV_DIR], t, y, model, src, cur, st, aux, f0)
+            kind = material_jump(mode, g0, t, y, aux, iv, fs) if model.half_thickness > 0.0 else -1
+            if kind >= 0:                       # the material's velocity jumped under the part
+                ev_i[n_ev, 0], ev_i[n_ev, 1], ev_i[n_ev, 2] = kind, mode, iv[IV_MODE]
+                ev_f[n_ev, 0], ev_f[n_ev, 1] = t, y[0]
+                n_ev += 1
+                mode = iv[IV_MODE]
+                g0, g1 = evaluate(mode, iv[IV_DIR], t, y, model, src, cur, st, aux, f0)
             t_req0 = aux[AUX_T_REQ]
             need_eval = False
             if dip_search:                      # the margins' slopes where this step starts
@@ -286,6 +297,8 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
                     break
                 h *= max(0.2, 0.9 * err ** -0.2)
                 h_proposed = 0.0
+            if model.half_thickness > 0.0 and mode == STUCK:
+                y1[1] = aux[AUX_MAT_VX]         # stuck: the part's velocity is its material point's, exactly
             t_req1 = aux[AUX_T_REQ]
             end_slope0 = end_slope1 = math.nan
             if dip_search:                      # in closed form where it has one (else NaN)
@@ -389,7 +402,7 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
                     rk4_step(mode, direction, t, y, f0, theta * h, model, src, cur, st, aux, work, y1)
                     if attempt == 1 or slope >= 0.0:
                         break
-                    if mode == SLIDING and which == 0:
+                    if mode == SLIDING and which == 0 and model.half_thickness == 0.0:
                         g_true = direction * y1[1]
                     else:
                         g_true = evaluate(mode, direction, t + theta * h, y1, model, src, cur, st, aux,

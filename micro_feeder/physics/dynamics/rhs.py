@@ -328,7 +328,7 @@ def material_point(x: float, st: np.ndarray, model: KernelModel, aux: np.ndarray
     return xm
 
 
-@jit_inline
+@jit
 def material_load(x: float, xd: float, stuck: bool, st: np.ndarray, base_acc: float, model: KernelModel,
                   aux: np.ndarray) -> None:
     """:func:`contact_load` for a surface whose material points also move along x (surface.thickness t > 0).
@@ -340,7 +340,8 @@ def material_load(x: float, xd: float, stuck: bool, st: np.ndarray, base_acc: fl
     T_req = m τ·(A + (a_b, g)), and Ẍ = (T − T_req) / (m J), so ẍ = A_x + (1 + u_X) Ẍ.
     At t = 0 these are contact_load's. ``aux`` gets N, T_req, Q_max, the surface as a graph over x (height,
     slope dz/dx, its rate at fixed x, L) and the material quantities (AUX_MAT_*, AUX_SLIP, AUX_STRETCH =
-    1 + u_X, AUX_ARC = J, AUX_MAT_AX = A_x)."""
+    1 + u_X, AUX_ARC = J, AUX_MAT_AX = A_x). Compiled once and called, not inlined (as is
+    :func:`material_evaluate`): off the seed's path, inlining it at every site only grows the compile."""
     c, m = model.half_thickness, model.mass
     xm = material_point(x, st, model, aux)
     first, stop = felt(model, aux)
@@ -367,7 +368,7 @@ def material_load(x: float, xd: float, stuck: bool, st: np.ndarray, base_acc: fl
     aux[AUX_SLIP], aux[AUX_STRETCH], aux[AUX_ARC], aux[AUX_MAT_AX] = slip, stretch, arc, ax
 
 
-@jit_inline
+@jit
 def material_evaluate(mode: int, direction: int, y: np.ndarray, model: KernelModel, st: np.ndarray,
                       base_acc: float, aux: np.ndarray, dy: np.ndarray) -> tuple[float, float]:
     """:func:`evaluate` in contact with surface.thickness: stuck, the part moves with its material point
