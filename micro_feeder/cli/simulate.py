@@ -181,6 +181,8 @@ def describe(model: FeederModel) -> str:
                    f'{math.degrees(model.track.vibration_angle):g} deg to it')
     else:
         surface = f'{model.n_actuators} actuator(s)'
+        if model.surface.thickness > 0.0:
+            surface += f', plate {model.surface.thickness * 1e3:g} mm thick'
     contact = f'coulomb mu = {model.contact.mu:g}' if model.contact.model == 'coulomb' else model.contact.preset
     return (f'{s.waveform} stroke {s.amplitude * 1e6:g} um at {s.frequency:g} Hz x {s.count}, {surface}, '
             f'{describe_parts(model)}, contact {contact}, landing {model.landing.law}')
