@@ -1,6 +1,7 @@
 """A stream follows sim time wherever it goes (issue 30): after a reset (sim time back to 0, as a new simulator
-also shows it), a new simulator whose sim time is already past the old one's, or a stall of the sender (sim
-time ran past the strokes scheduled), the stream re-phases
+also shows it), a new simulator whose sim time is already past the old one's, a stall of the sender (sim
+time ran past the strokes scheduled) or a starved simulator (windows delivered late and refused, with the
+windows continuing them: the sender learns it from the refusal), the stream re-phases
 ``stream.lead`` ahead of sim time, ramping from the strokes the simulator holds; it never replays stale
 windows, never joins mid-stroke with a jump, and the part never moves faster than the same strokes move it
 without the fault.
@@ -24,7 +25,8 @@ from micro_feeder.sim.commands import CommandRejected, parse_trajectory_cdr
 from micro_feeder.sim.stepper import Stepper, build_model
 from micro_feeder.sim.stream import StrokeStream, encode_window
 
-LEAD, WINDOW = 0.02, 0.005          # s: stream.lead and stream.window (short, so the faults are long against them)
+LEAD, WINDOW = 0.02, 0.0053       # s: stream.lead and stream.window (short against the faults; not a whole number
+                                    # of stroke periods, so that windows start mid-stroke)
 SAMPLE = 1e-3 / 27                  # s: the simulator's state is looked at this often
 DURATION = 0.3                      # s of sim time
 FAULT_AT, FAULT_FOR = 0.1, 0.05     # s: when the fault happens; how long the sender is stalled
@@ -47,25 +49,31 @@ def _run(scenario: str, fault: str) -> Run:
     n = stepper.model.n_actuators
     stream = StrokeStream(StrokeParams.from_flat({**flat, 'stroke.count': 1}), 0, n, round(LEAD * 1e9),
                           window=WINDOW, max_points=2000, knots_per_stroke=0)
-    run, previous, sent, fault_done, new_simulator = Run(), None, 0, False, False
+    run, previous, fault_done, new_simulator = Run(), None, False, False
+    in_transit: list[tuple[int, bytes]] = []            # (window number, message) not yet delivered
     elapsed = 0.0                                       # sim time lived through, across the reset
     while elapsed < DURATION:
-        stalled = fault == 'stall' and FAULT_AT <= stepper.t < FAULT_AT + FAULT_FOR
-        stepper_now = stepper
-        if not stalled:
-            windows, why = stream.follow(stepper.t, LEAD, stepper_now.observe().strokes.copy,
+        faulty = FAULT_AT <= stepper.t < FAULT_AT + FAULT_FOR
+        if not (fault == 'stall' and faulty):
+            windows, why = stream.follow(stepper.t, LEAD, stepper.observe().strokes.copy,
                                          new_simulator=new_simulator)
             new_simulator = False
             if why is not None:
                 run.rephased.append((stepper.t, why))
             for window in windows:
-                sent += 1
-                cmd = parse_trajectory_cdr(encode_window(window, f'w{sent}'), joint_names(n), stepper.limits)
+                in_transit.append((stream.windows_made, encode_window(window, f'sender:b1:w{stream.windows_made}')))
+        if not (fault == 'late delivery' and faulty):   # a starved simulator: the windows wait, in order
+            for number, message in in_transit:
+                cmd = parse_trajectory_cdr(message, joint_names(n), stepper.limits)
                 try:
                     stepper.command_trajectory(cmd)
-                    run.window_starts.append(window[0] * 1e-9)
-                except CommandRejected as err:
+                    run.window_starts.append(cmd.stamp)
+                except CommandRejected as err:           # what simulator/command_status tells the sender
                     run.refused.append(str(err))
+                    why = stream.refused(number, stepper.t, LEAD, stepper.observe().strokes.copy())
+                    if why is not None:
+                        run.rephased.append((stepper.t, why))
+            in_transit.clear()
         stepper.advance(stepper.t + SAMPLE)
         elapsed += SAMPLE
         obs = stepper.observe()
@@ -91,21 +99,26 @@ def unfaulted() -> dict[str, Run]:
 
 
 @pytest.mark.parametrize('scenario', list(SCENARIOS))
-@pytest.mark.parametrize('fault', ['stall', 'reset', 'new simulator'])
+@pytest.mark.parametrize('fault', ['stall', 'reset', 'new simulator', 'late delivery'])
 def test_a_stream_rephases_without_stale_windows_jumps_or_throws(scenario: str, fault: str,
                                                                   unfaulted: dict[str, Run]) -> None:
     reference, run = unfaulted[scenario], _run(scenario, fault)
     assert not reference.refused and not reference.rephased
-    assert not run.refused, run.refused[:3]                 # no window late, none joined with a jump
+    if fault == 'late delivery':     # the windows that came late are refused, and those continuing them
+        assert run.refused and all('late by' in r or 'was not applied' in r for r in run.refused), run.refused
+    else:
+        assert not run.refused, run.refused[:3]             # no window late, none joined with a jump
     assert len(run.rephased) == 1, run.rephased
     when, why = run.rephased[0]
-    assert {'reset': 'went back', 'stall': 'passed the strokes', 'new simulator': 'a new simulator'}[fault] in why, why
+    assert {'reset': 'went back', 'stall': 'passed the strokes', 'new simulator': 'a new simulator',
+            'late delivery': 'refused by the simulator'}[fault] in why, why
     resumed = min(t for t in run.window_starts if t >= when)
     assert resumed - when <= 2 * LEAD + 1e-9                # strokes again within 2 x stream.lead
-    # the strokes never move faster than the waveform does (a ramp, no jump), the part never faster than
-    # the same strokes move it without the fault
-    assert run.max_stroke_step <= reference.max_stroke_step * (1 + 1e-6), (run.max_stroke_step,
-                                                                           reference.max_stroke_step)
+    # the strokes move no faster than the waveform does, but for the ramp (a quintic from rest that joins the
+    # waveform mid-stroke peaks up to 0.4 % above it here; a jump is 5-6x it), the part no faster than the
+    # same strokes move it without the fault
+    assert run.max_stroke_step <= reference.max_stroke_step * 1.01, (run.max_stroke_step,
+                                                                     reference.max_stroke_step)
     assert run.max_speed <= reference.max_speed * 1.05, (run.max_speed, reference.max_speed)
 
 

@@ -111,11 +111,11 @@ SERVICE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, dur
 
 class RefusalWatch:
     """A command sender's view of ``simulator/command_status``: the simulator's refusals of the commands whose
-    identity (``header.frame_id``) starts with ``prefix``, counted, the last reason kept, and logged on
-    ``node``'s logger (throttled: one line per 5 s at most)."""
+    identity (``header.frame_id``) starts with ``prefix``, counted, the last reason kept, logged on ``node``'s
+    logger (throttled: one line per 5 s at most) and passed to ``on_refused`` (the refused identity, the reason)."""
 
-    def __init__(self, node: Any, prefix: str):
-        self._node, self._prefix = node, prefix
+    def __init__(self, node: Any, prefix: str, on_refused: Callable[[str, str], None] | None = None):
+        self._node, self._prefix, self._on_refused = node, prefix, on_refused
         self.refused = 0
         self.last = ''
         node.create_subscription(DiagnosticArray, 'simulator/command_status', self._on_status,
@@ -126,5 +126,8 @@ class RefusalWatch:
         if not command_id.startswith(self._prefix):
             return
         self.refused += 1
-        self.last = f'{command_id}: {msg.status[0].message if msg.status else ""}'
+        reason = msg.status[0].message if msg.status else ''
+        self.last = f'{command_id}: {reason}'
         self._node.get_logger().warning(f'the simulator refused {self.last}', throttle_duration_sec=5.0)
+        if self._on_refused is not None:
+            self._on_refused(command_id, reason)

@@ -19,6 +19,7 @@ burst's length.
 
 from __future__ import annotations
 
+import re
 import time
 from collections.abc import Mapping
 from typing import Any
@@ -42,6 +43,7 @@ from ..interface.names import joint_names
 from ..physics.parameters import ParamSpec
 from ..physics.waveforms import StrokeParams
 from ..settings import model_specs
+from ..sim.commands import DUPLICATE
 from ..sim.stream import StrokeStream, encode_stop, encode_window, points_per_message, sample_waveform
 from ._ros import RefusalWatch, topic_qos
 from .parameters import check_changes, declare, values
@@ -90,8 +92,7 @@ class Actuator(Node):
         self._stream: StrokeStream | None = None
         self._pending_stream = False                 # streamed start waiting for the first sim time
         self._instance = f'{self.get_fully_qualified_name()}@{time.time_ns():x}'   # names this run's commands
-        self.refusals = RefusalWatch(self, self._instance + ':')   # the simulator's answers to them
-        self._windows_in_burst = 0
+        self.refusals = RefusalWatch(self, self._instance + ':', self._on_refused)   # the simulator's answers
         self._graph_seen: frozenset[bytes] | None = None   # the trajectory subscriptions seen ready, and since when
         self._graph_since = 0.0
         self._joint_states: bytes | None = None      # the latest actuator/joint_states, serialized
@@ -123,7 +124,6 @@ class Actuator(Node):
         streaming it. Returns a one-line description."""
         self._stream = None
         self.bursts += 1
-        self._windows_in_burst = 0
         knots = self._whole_burst_knots()
         if knots is not None:
             times, pos, vel, acc = knots
@@ -245,14 +245,28 @@ class Actuator(Node):
             self.rephases += 1
             self.underruns += 'passed the strokes' in why
             self.get_logger().warning(f'stream re-phased: {why}', throttle_duration_sec=5.0)
-        for window in windows:
-            self._windows_in_burst += 1
-            self._pub.publish(encode_window(window, self._command_id(self._windows_in_burst)))
+        for number, window in enumerate(windows, start=stream.windows_made - len(windows) + 1):
+            self._pub.publish(encode_window(window, self._command_id(number)))
             self.windows += 1
         if stream.done:
             self._stream = None
             self._pub.publish(encode_stop(stream.n_actuators, stream.scheduled_until,
-                                          self._command_id(self._windows_in_burst + 1)))
+                                          self._command_id(stream.windows_made + 1)))
+
+    def _on_refused(self, command_id: str, reason: str) -> None:
+        """The simulator refused one of this node's commands. When it is a window of the stream running that
+        was not applied (late, or continuing one that was; a duplicate's first copy was applied), re-phase the
+        stream from the strokes held, so that what follows is applied (:meth:`StrokeStream.refused`); the
+        windows already sent after it are refused as well."""
+        match = re.fullmatch(r':b(\d+):w(\d+)', command_id.removeprefix(self._instance))
+        if (match is None or int(match[1]) != self.bursts or self._stream is None or self.sim_time is None
+                or DUPLICATE in reason):
+            return
+        why = self._stream.refused(int(match[2]), self.sim_time, self.get_parameter('stream.lead').value,
+                                   self._held_strokes())
+        if why is not None:
+            self.rephases += 1
+            self.get_logger().warning(f'stream re-phased: {why}', throttle_duration_sec=5.0)
 
     def _on_sim_time(self, data: bytes) -> None:
         self.sim_time = stamps.header_stamp(data)

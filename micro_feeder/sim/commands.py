@@ -38,6 +38,9 @@ class CommandRejected(ValueError):
     """An actuator command that is not applied; the message says why."""
 
 
+DUPLICATE = 'a duplicate of the command applied'   # in the reason of a refused duplicate: its first copy applied
+
+
 @dataclass(frozen=True)
 class TrajectoryCommand:
     """A checked ``actuator/trajectory``: knots in the simulator's joint order, SI units.

@@ -10,6 +10,7 @@ the parameters and of the (time, command) sequence, which makes a stepped run re
 from __future__ import annotations
 
 import functools
+import re
 from collections import OrderedDict
 from collections.abc import Mapping
 from typing import Any
@@ -22,10 +23,22 @@ from ..physics.particle import ParticleParams
 from ..physics.parts import PartsModel, PartsState
 from ..physics.trajectory import CommandLimits, check_table
 from ..physics.waveforms import StrokeSchedule, trajectory_table
-from .commands import CommandRejected, TrajectoryCommand, start_time
+from .commands import DUPLICATE, CommandRejected, TrajectoryCommand, start_time
 
 REMEMBERED_COMMANDS = 100_000    # identities of applied commands kept for refusing duplicates (~6 min of windows)
 JOIN_TOLERANCE = (1e-9, 1e-5)    # m, m/s: a late trajectory joins the stroke in force only this close to it
+LEFT_LIMIT_S = 1e-12             # s: "just before" a window's start (knots are whole ns; stamp + offset and the
+                                 # next stamp differ by rounding, ~1e-18 s)
+WINDOW_ID = re.compile(r'^(?P<stream>.+):w(?P<window>\d+)$')   # a stream window's identity: <stream>:w<k>
+
+
+def previous_window(command_id: str) -> str | None:
+    """The identity of the window that ``command_id`` continues (``<stream>:w<k-1>`` for ``<stream>:w<k>``,
+    k ≥ 2), or None when it names no stream window (docs/interface.md, *Commands*)."""
+    match = WINDOW_ID.match(command_id)
+    if match is None or int(match['window']) < 2:
+        return None
+    return f"{match['stream']}:w{int(match['window']) - 1}"
 
 
 @functools.lru_cache(maxsize=4)
@@ -130,14 +143,17 @@ class Stepper:
         Raises :class:`CommandRejected` (the schedule unchanged) when the interpolated stroke, joined to
         the stroke in force at the start, leaves the piezo limits anywhere between knots; when its identity
         (``command_id``) was applied before (a duplicate: each command applies once, whoever resends it);
-        and when it is late (stamped before now) and joining it now would jump the stroke
-        (:meth:`_check_late_join`)."""
+        when it is late (stamped before now) and joining it now would jump the stroke
+        (:meth:`_check_late_join`); and when it continues a stream window but would jump the stroke at its start
+        (:meth:`_check_continuation`)."""
         if cmd.command_id in self.applied:
-            raise CommandRejected(f'trajectory {cmd.command_id}: a duplicate of the command applied at '
+            raise CommandRejected(f'trajectory {cmd.command_id}: {DUPLICATE} at '
                                   f't = {self.applied[cmd.command_id]:.9f} s, not applied again')
         t0 = start_time(cmd.stamp, self.state.t)
         if not cmd.is_stop and 0.0 < cmd.stamp < t0:
             self._check_late_join(cmd, t0)
+        elif not cmd.is_stop and cmd.stamp > 0.0:
+            self._check_continuation(cmd)
         if cmd.is_stop:
             self.schedule.hold_from(t0)
         else:
@@ -174,6 +190,27 @@ class Stepper:
             raise CommandRejected(f'trajectory late by {late_ms:.3f} ms: joining it at t = {t0:.9f} s would jump '
                                   f'joint {k} by {jump[0, k] * 1e6:.4g} µm and {jump[1, k] * 1e3:.4g} mm/s, which '
                                   'throws the part; not applied (stamp windows ahead of sim time, or re-phase)')
+
+    def _check_continuation(self, cmd: TrajectoryCommand) -> None:
+        """A stream window (identity ``<stream>:w<k>``, k ≥ 2) starts at a knot it shares with window k−1, so
+        the stroke in force just before its start is where the window starts. When it is not (window k−1 was
+        refused or lost, or another command replaced it), taking the knot as the stroke would jump the surface
+        there and throw the part: refused (beyond :data:`JOIN_TOLERANCE`); the sender re-phases from the
+        strokes held, as a re-phased window's ramp starts where they are."""
+        previous = previous_window(cmd.command_id)
+        if previous is None or cmd.offsets.size == 0 or cmd.offsets[0] != 0.0:
+            return
+        at = cmd.stamp
+        before = self.schedule.evaluate(at - LEFT_LIMIT_S)[:2]      # the stroke in force just before the start
+        own = np.stack([cmd.positions[0], before[1] if cmd.velocities is None else cmd.velocities[0]])
+        jump = np.abs(own - before)     # velocities: only where the window gives them
+        if jump[0].max() > JOIN_TOLERANCE[0] or jump[1].max() > JOIN_TOLERANCE[1]:
+            k = int(np.argmax(np.maximum(jump[0] / JOIN_TOLERANCE[0], jump[1] / JOIN_TOLERANCE[1])))
+            applied = 'was applied but replaced' if previous in self.applied else 'was not applied'
+            raise CommandRejected(f'trajectory {cmd.command_id} continues {previous}, which {applied}: starting it '
+                                  f'at t = {at:.9f} s would jump joint {k} by {jump[0, k] * 1e6:.4g} µm and '
+                                  f'{jump[1, k] * 1e3:.4g} mm/s, which throws the part; not applied (the sender '
+                                  're-phases from the strokes held)')
 
     def command_setpoints(self, values: np.ndarray) -> None:
         """Hold the strokes at ``values`` (m) from now on (the piezo model, when on, smooths the step)."""

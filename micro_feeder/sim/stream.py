@@ -24,6 +24,7 @@ from ..physics.waveforms import StrokeParams, waveform_table
 Window = tuple[int, np.ndarray, np.ndarray]   # stamp (ns of sim time), knot offsets (ns), (3, n, actuators) s, ṡ, s̈
 TIME_BACK = 1e-3               # s: sim time going back more than this is a reset or a new simulator
 RAMP_MIN_NS = 1_000_000        # a re-phased stream ramps to the waveform over at least this long (ns)
+WINDOW_ENDS_KEPT = 256         # windows whose last knot a stream remembers, for re-phasing after a refusal
 MESSAGE_BYTES = 256 * 1024     # a trajectory message's knots take at most this many bytes (whatever the joints)
 
 
@@ -61,6 +62,9 @@ class StrokeStream:
         self.last_positions = np.zeros(n_actuators)        # strokes at the last knot sent (m): what a simulator
                                                            # holds once the stream runs out
         self._last_now: float | None = None                # sim time of the last follow() (s)
+        self.windows_made = 0                              # windows returned by next_window(): the k of w<k>
+        self._rephased_after = 0                           # windows made before the last re-phase (in flight)
+        self._window_ends: dict[int, np.ndarray] = {}      # window number: strokes at its last knot (m), recent ones
 
     @property
     def done(self) -> bool:
@@ -82,7 +86,10 @@ class StrokeStream:
             ns, values = ns[:room], values[:, :room]
             self._window_ns = max(int(ns[-1]) - start, 1)
         self.sent_ns = int(ns[-1])
+        self.windows_made += 1
         self.last_positions = values[0, -1].copy()
+        self._window_ends[self.windows_made] = self.last_positions
+        self._window_ends.pop(self.windows_made - WINDOW_ENDS_KEPT, None)
         if self._ramp is not None:           # a knot holding the strokes where they are, then the waveform
             start, held = self._ramp
             self._ramp = None
@@ -119,6 +126,23 @@ class StrokeStream:
             windows.append(self.next_window())
         return windows, why
 
+    def refused(self, window: int, now: float, lead: float, held: np.ndarray | None) -> str | None:
+        """The simulator refused this stream's window number ``window`` (1 = the first :meth:`next_window`)
+        at sim time ``now`` (s): re-phase ``lead`` ahead, in phase with sim time, as after a stall, ramping
+        from where the simulator holds the strokes: the last knot of window ``window`` − 1, which it applied
+        (a refusal of it would have come first), or ``held`` (m, what it reports; the last knot sent when None)
+        when that window is from before the last re-phase. The windows sent after the refused one continue
+        it and are refused too (docs/interface.md, *Commands*); a refusal of a window made before the last
+        re-phase is one of those and changes nothing. Returns why it re-phased, or None."""
+        if window <= self._rephased_after or self.done:
+            return None
+        at_ns = round((now + lead) * 1e9)
+        applied_end = self._window_ends.get(window - 1) if window - 1 > self._rephased_after else None
+        start = applied_end if applied_end is not None else self.last_positions if held is None else held
+        self.rejoin(at_ns, start, keep_phase=True)
+        return (f'window {window} refused by the simulator at {now:.6f} s: rejoined at t = {at_ns * 1e-9:.6f} s '
+                'from the strokes held')
+
     def rejoin(self, at_ns: int, held: np.ndarray, *, keep_phase: bool) -> None:
         """Start the next window at sim time ``at_ns`` from the strokes ``held`` (m, at rest), ramping to the
         waveform over one stroke period: after the simulator's strokes ran out (``keep_phase``: the waveform
@@ -127,6 +151,7 @@ class StrokeStream:
         origin). The ramp is a quintic from rest at ``held`` to the waveform's s, ṡ, s̈, so the stroke never
         jumps."""
         ramp_ns = max(round(self.params.period_s * 1e9), RAMP_MIN_NS)
+        self._rephased_after = self.windows_made
         if keep_phase:
             self.sent_ns = max(at_ns + ramp_ns - self.origin_ns, self.sent_ns)
             self.origin_ns = at_ns + ramp_ns - self.sent_ns
