@@ -30,6 +30,7 @@ LEAD, WINDOW = 0.02, 0.0053       # s: stream.lead and stream.window (short agai
 SAMPLE = 1e-3 / 27                  # s: the simulator's state is looked at this often
 DURATION = 0.3                      # s of sim time
 FAULT_AT, FAULT_FOR = 0.1, 0.05     # s: when the fault happens; how long the sender is stalled
+REFUSAL_DELAY = 0.004               # s: a refusal reaches the sender this long after it (it sends meanwhile)
 SCENARIOS = {'one actuator': [], 'travelling wave': ['--params', 'config/travelling_wave.yaml']}
 
 
@@ -51,12 +52,17 @@ def _run(scenario: str, fault: str) -> Run:
                           window=WINDOW, max_points=2000, knots_per_stroke=0)
     run, previous, fault_done, new_simulator = Run(), None, False, False
     in_transit: list[tuple[int, bytes]] = []            # (window number, message) not yet delivered
+    refusals: list[tuple[float, int]] = []              # (sim time it reaches the sender, window number)
     elapsed = 0.0                                       # sim time lived through, across the reset
     while elapsed < DURATION:
         faulty = FAULT_AT <= stepper.t < FAULT_AT + FAULT_FOR
         if not (fault == 'stall' and faulty):
-            windows, why = stream.follow(stepper.t, LEAD, stepper.observe().strokes.copy,
-                                         new_simulator=new_simulator)
+            for number in [number for at, number in refusals if at <= stepper.t]:
+                why = stream.refused(number, stepper.t, LEAD)
+                if why is not None:
+                    run.rephased.append((stepper.t, why))
+            refusals = [(at, number) for at, number in refusals if at > stepper.t]
+            windows, why = stream.follow(stepper.t, LEAD, new_simulator=new_simulator)
             new_simulator = False
             if why is not None:
                 run.rephased.append((stepper.t, why))
@@ -70,9 +76,7 @@ def _run(scenario: str, fault: str) -> Run:
                     run.window_starts.append(cmd.stamp)
                 except CommandRejected as err:           # what simulator/command_status tells the sender
                     run.refused.append(str(err))
-                    why = stream.refused(number, stepper.t, LEAD, stepper.observe().strokes.copy())
-                    if why is not None:
-                        run.rephased.append((stepper.t, why))
+                    refusals.append((stepper.t + REFUSAL_DELAY, number))
             in_transit.clear()
         stepper.advance(stepper.t + SAMPLE)
         elapsed += SAMPLE

@@ -32,7 +32,6 @@ from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger
@@ -95,7 +94,6 @@ class Actuator(Node):
         self.refusals = RefusalWatch(self, self._instance + ':', self._on_refused)   # the simulator's answers
         self._graph_seen: frozenset[bytes] | None = None   # the trajectory subscriptions seen ready, and since when
         self._graph_since = 0.0
-        self._joint_states: bytes | None = None      # the latest actuator/joint_states, serialized
         self._simulators: frozenset[bytes] = frozenset()   # trajectory subscriptions of the simulators reached
         self._matched = -1                           # trajectory subscriptions matched at the last look
         self._graph_looked = 0.0                     # monotonic time of that look (s)
@@ -197,13 +195,6 @@ class Actuator(Node):
         self._simulators = simulators
         return bool(simulators), new
 
-    def _held_strokes(self) -> np.ndarray | None:
-        """The strokes (m) the simulator reported last on ``actuator/joint_states``, or None."""
-        if self._joint_states is None:
-            return None
-        positions = np.asarray(deserialize_message(self._joint_states, JointState).position, dtype=float)
-        return positions if self._stream is not None and positions.size == self._stream.n_actuators else None
-
     def trajectory_subscribers(self) -> int:
         """Subscriptions matched on ``actuator/trajectory``."""
         return self._pub.get_subscription_count()
@@ -239,8 +230,7 @@ class Actuator(Node):
         reached, new_simulator = self._look_for_simulators()
         if not reached:                              # sent now, it would be lost: wait, re-phase when one is back
             return
-        windows, why = stream.follow(now, self.get_parameter('stream.lead').value, self._held_strokes,
-                                     new_simulator=new_simulator)
+        windows, why = stream.follow(now, self.get_parameter('stream.lead').value, new_simulator=new_simulator)
         if why is not None:
             self.rephases += 1
             self.underruns += 'passed the strokes' in why
@@ -256,21 +246,19 @@ class Actuator(Node):
     def _on_refused(self, command_id: str, reason: str) -> None:
         """The simulator refused one of this node's commands. When it is a window of the stream running that
         was not applied (late, or continuing one that was; a duplicate's first copy was applied), re-phase the
-        stream from the strokes held, so that what follows is applied (:meth:`StrokeStream.refused`); the
+        stream, so that what follows is applied (:meth:`StrokeStream.refused`); the
         windows already sent after it are refused as well."""
         match = re.fullmatch(r':b(\d+):w(\d+)', command_id.removeprefix(self._instance))
         if (match is None or int(match[1]) != self.bursts or self._stream is None or self.sim_time is None
                 or DUPLICATE in reason):
             return
-        why = self._stream.refused(int(match[2]), self.sim_time, self.get_parameter('stream.lead').value,
-                                   self._held_strokes())
+        why = self._stream.refused(int(match[2]), self.sim_time, self.get_parameter('stream.lead').value)
         if why is not None:
             self.rephases += 1
             self.get_logger().warning(f'stream re-phased: {why}', throttle_duration_sec=5.0)
 
     def _on_sim_time(self, data: bytes) -> None:
         self.sim_time = stamps.header_stamp(data)
-        self._joint_states = data
         if self._pending_stream:
             origin_ns = round((self.sim_time + self.get_parameter('stream.lead').value) * 1e9)  # _start_stream's
             self._start_stream(self.sim_time)

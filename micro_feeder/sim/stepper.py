@@ -195,8 +195,8 @@ class Stepper:
         """A stream window (identity ``<stream>:w<k>``, k ≥ 2) starts at a knot it shares with window k−1, so
         the stroke in force just before its start is where the window starts. When it is not (window k−1 was
         refused or lost, or another command replaced it), taking the knot as the stroke would jump the surface
-        there and throw the part: refused (beyond :data:`JOIN_TOLERANCE`); the sender re-phases from the
-        strokes held, as a re-phased window's ramp starts where they are."""
+        there and throw the part: refused (beyond :data:`JOIN_TOLERANCE`); the sender re-phases with a window
+        that has no knot at its start, which the schedule starts from the stroke in force (no check needed)."""
         previous = previous_window(cmd.command_id)
         if previous is None or cmd.offsets.size == 0 or cmd.offsets[0] != 0.0:
             return
@@ -210,7 +210,7 @@ class Stepper:
             raise CommandRejected(f'trajectory {cmd.command_id} continues {previous}, which {applied}: starting it '
                                   f'at t = {at:.9f} s would jump joint {k} by {jump[0, k] * 1e6:.4g} µm and '
                                   f'{jump[1, k] * 1e3:.4g} mm/s, which throws the part; not applied (the sender '
-                                  're-phases from the strokes held)')
+                                  're-phases)')
 
     def command_setpoints(self, values: np.ndarray) -> None:
         """Hold the strokes at ``values`` (m) from now on (the piezo model, when on, smooths the step)."""

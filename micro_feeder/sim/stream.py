@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable
 
 import numpy as np
 
@@ -24,7 +23,6 @@ from ..physics.waveforms import StrokeParams, waveform_table
 Window = tuple[int, np.ndarray, np.ndarray]   # stamp (ns of sim time), knot offsets (ns), (3, n, actuators) s, ṡ, s̈
 TIME_BACK = 1e-3               # s: sim time going back more than this is a reset or a new simulator
 RAMP_MIN_NS = 1_000_000        # a re-phased stream ramps to the waveform over at least this long (ns)
-WINDOW_ENDS_KEPT = 256         # windows whose last knot a stream remembers, for re-phasing after a refusal
 MESSAGE_BYTES = 256 * 1024     # a trajectory message's knots take at most this many bytes (whatever the joints)
 
 
@@ -58,13 +56,12 @@ class StrokeStream:
         self._window_ns = max(round(window * 1e9), 1)
         self._max_points = points_per_message(max_points, n_actuators)
         self._max_spacing = max_spacing(params, knots_per_stroke)
-        self._ramp: tuple[int, np.ndarray] | None = None   # (burst time ns, held strokes) the next window starts from
+        self._ramp_from: int | None = None                 # burst time (ns) a re-phased stream's next window starts
         self.last_positions = np.zeros(n_actuators)        # strokes at the last knot sent (m): what a simulator
                                                            # holds once the stream runs out
         self._last_now: float | None = None                # sim time of the last follow() (s)
         self.windows_made = 0                              # windows returned by next_window(): the k of w<k>
         self._rephased_after = 0                           # windows made before the last re-phase (in flight)
-        self._window_ends: dict[int, np.ndarray] = {}      # window number: strokes at its last knot (m), recent ones
 
     @property
     def done(self) -> bool:
@@ -73,91 +70,79 @@ class StrokeStream:
     @property
     def scheduled_until(self) -> float:
         """Sim time (s) up to which the strokes are scheduled (a pending ramp's start: nothing after it is sent)."""
-        return (self.origin_ns + (self._ramp[0] if self._ramp is not None else self.sent_ns)) * 1e-9
+        return (self.origin_ns + (self._ramp_from if self._ramp_from is not None else self.sent_ns)) * 1e-9
 
     def next_window(self) -> Window:
-        """(stamp in ns of sim time, knot offsets from the stamp in ns, (3, n, actuators) s, ṡ, s̈)."""
+        """(stamp in ns of sim time, knot offsets from the stamp in ns, (3, n, actuators) s, ṡ, s̈). A window
+        continues the previous one from the knot they share (offset 0). The first window after a re-phase has
+        no knot at its stamp: the simulator starts it from the stroke in force there (s, ṡ, s̈), as
+        joint_trajectory_controller does, and interpolates to its first knot one ramp later, so the stroke
+        never jumps whatever the simulator holds."""
         start = self.sent_ns
         stop = start + self._window_ns if self.end_ns is None else min(start + self._window_ns, self.end_ns)
         table = waveform_table(self._strokes_through(stop), self.n_actuators)
         ns, values = table_knots(table, start * 1e-9, stop * 1e-9, max_spacing=self._max_spacing)
-        room = self._max_points - (self._ramp is not None)
+        room = self._max_points
         if ns.size > room:                   # cut at a message's knots; later windows are made that long
             ns, values = ns[:room], values[:, :room]
             self._window_ns = max(int(ns[-1]) - start, 1)
         self.sent_ns = int(ns[-1])
         self.windows_made += 1
         self.last_positions = values[0, -1].copy()
-        self._window_ends[self.windows_made] = self.last_positions
-        self._window_ends.pop(self.windows_made - WINDOW_ENDS_KEPT, None)
-        if self._ramp is not None:           # a knot holding the strokes where they are, then the waveform
-            start, held = self._ramp
-            self._ramp = None
-            ns = np.concatenate([[start], ns])
-            rest = np.zeros((3, 1, self.n_actuators))
-            rest[0, 0] = held
-            values = np.concatenate([rest, values], axis=1)
+        if self._ramp_from is not None:      # stamped where the ramp starts; its first knot one ramp later
+            start, self._ramp_from = self._ramp_from, None
         return self.origin_ns + start, ns - start, values
 
-    def follow(self, now: float, lead: float, held: Callable[[], np.ndarray | None] | None = None, *,
-               new_simulator: bool = False) -> tuple[list[Window], str | None]:
+    def follow(self, now: float, lead: float, *, new_simulator: bool = False) -> tuple[list[Window], str | None]:
         """The windows to send now that sim time is ``now`` (s), keeping ``lead`` (s) of strokes scheduled ahead,
-        and why the stream re-phased first (None when it did not). It re-phases (:meth:`rejoin`, ``lead`` ahead,
-        from the strokes ``held()`` (m) the simulator reports now; when None, the last knot sent, or rest after
-        a time jump) when sim time went back or the sender saw ``new_simulator`` (a reset, a new simulator:
-        the burst continuing) or passed the strokes scheduled (this sender stalled, or lost the simulator: in
+        and why the stream re-phased first (None when it did not). It re-phases (:meth:`rejoin`, ``lead``
+        ahead) when sim time went back or the sender saw ``new_simulator`` (a reset, a new simulator: the
+        burst continuing) or passed the strokes scheduled (this sender stalled, or lost the simulator: in
         phase with sim time, the missed strokes skipped). Nothing stale is ever sent, and a re-phased stream
-        starts where the simulator's strokes are, so they never jump."""
+        ramps from wherever the simulator's strokes are, so they never jump."""
         why = None
         at_ns = round((now + lead) * 1e9)
         if new_simulator or (self._last_now is not None and now < self._last_now - TIME_BACK):
             cause = ('a new simulator' if new_simulator else
                      f'sim time went back from {self._last_now:.6f} s to {now:.6f} s (a reset, or a new simulator)')
-            why = f'{cause}: restarted from rest at t = {at_ns * 1e-9:.6f} s'
-            self.rejoin(at_ns, _reported(held, np.zeros(self.n_actuators)), keep_phase=False)
+            why = f'{cause}: restarted at t = {at_ns * 1e-9:.6f} s'
+            self.rejoin(at_ns, keep_phase=False)
         elif self.sent_ns > 0 and not self.done and self.scheduled_until < now:
             why = (f'sim time {now:.6f} s passed the strokes scheduled (until {self.scheduled_until:.6f} s: the '
                    f'sender stalled or lost the simulator, or stream.lead is short): rejoined at t = '
                    f'{at_ns * 1e-9:.6f} s')
-            self.rejoin(at_ns, _reported(held, self.last_positions), keep_phase=True)
+            self.rejoin(at_ns, keep_phase=True)
         self._last_now = now
         windows = []
         while not self.done and self.scheduled_until < now + lead:
             windows.append(self.next_window())
         return windows, why
 
-    def refused(self, window: int, now: float, lead: float, held: np.ndarray | None) -> str | None:
+    def refused(self, window: int, now: float, lead: float) -> str | None:
         """The simulator refused this stream's window number ``window`` (1 = the first :meth:`next_window`)
-        at sim time ``now`` (s): re-phase ``lead`` ahead, in phase with sim time, as after a stall, ramping
-        from where the simulator holds the strokes: the last knot of window ``window`` − 1, which it applied
-        (a refusal of it would have come first), or ``held`` (m, what it reports; the last knot sent when None)
-        when that window is from before the last re-phase. The windows sent after the refused one continue
-        it and are refused too (docs/interface.md, *Commands*); a refusal of a window made before the last
-        re-phase is one of those and changes nothing. Returns why it re-phased, or None."""
+        at sim time ``now`` (s): re-phase ``lead`` ahead, in phase with sim time, as after a stall. The
+        windows sent after the refused one continue it and are refused too (docs/interface.md, *Commands*);
+        a refusal of a window made before the last re-phase is one of those and changes nothing. Returns why
+        it re-phased, or None."""
         if window <= self._rephased_after or self.done:
             return None
         at_ns = round((now + lead) * 1e9)
-        applied_end = self._window_ends.get(window - 1) if window - 1 > self._rephased_after else None
-        start = applied_end if applied_end is not None else self.last_positions if held is None else held
-        self.rejoin(at_ns, start, keep_phase=True)
-        return (f'window {window} refused by the simulator at {now:.6f} s: rejoined at t = {at_ns * 1e-9:.6f} s '
-                'from the strokes held')
+        self.rejoin(at_ns, keep_phase=True)
+        return f'window {window} refused by the simulator at {now:.6f} s: rejoined at t = {at_ns * 1e-9:.6f} s'
 
-    def rejoin(self, at_ns: int, held: np.ndarray, *, keep_phase: bool) -> None:
-        """Start the next window at sim time ``at_ns`` from the strokes ``held`` (m, at rest), ramping to the
-        waveform over one stroke period: after the simulator's strokes ran out (``keep_phase``: the waveform
-        stays where the schedule puts it in sim time, what was missed is skipped, never replayed) or after
-        sim time went back (a reset, a new simulator: the burst continues from where it was sent, with a new
-        origin). The ramp is a quintic from rest at ``held`` to the waveform's s, ṡ, s̈, so the stroke never
-        jumps."""
+    def rejoin(self, at_ns: int, *, keep_phase: bool) -> None:
+        """Start the next window at sim time ``at_ns``, ramping over one stroke period from the stroke in force
+        there (whatever the simulator holds: the window has no knot at its stamp) to the waveform's s, ṡ, s̈:
+        after the simulator's strokes ran out or refused a window (``keep_phase``: the waveform stays where
+        the schedule puts it in sim time; what was missed is skipped and what was refused is made again from
+        there, never replayed late) or after sim time went back (a reset, a new simulator: the burst continues
+        from where it was sent, with a new origin)."""
         ramp_ns = max(round(self.params.period_s * 1e9), RAMP_MIN_NS)
         self._rephased_after = self.windows_made
         if keep_phase:
-            self.sent_ns = max(at_ns + ramp_ns - self.origin_ns, self.sent_ns)
-            self.origin_ns = at_ns + ramp_ns - self.sent_ns
-        else:
-            self.origin_ns = at_ns + ramp_ns - self.sent_ns
-        self._ramp = (self.sent_ns - ramp_ns, np.asarray(held, dtype=float).copy())
+            self.sent_ns = max(at_ns + ramp_ns - self.origin_ns, 0)
+        self.origin_ns = at_ns + ramp_ns - self.sent_ns
+        self._ramp_from = self.sent_ns - ramp_ns
 
     def _strokes_through(self, stop_ns: int) -> StrokeParams:
         """The burst's parameters with enough strokes to cover burst time ``stop_ns`` (endless: a count
@@ -167,11 +152,6 @@ class StrokeStream:
         p = self.params
         needed = math.floor((stop_ns * 1e-9 - p.delay) / p.period_s) + 2 + math.ceil(max(p.phases))
         return dataclasses.replace(p, count=max(needed, 1))
-
-
-def _reported(held: Callable[[], np.ndarray | None] | None, otherwise: np.ndarray) -> np.ndarray:
-    strokes = None if held is None else held()
-    return otherwise if strokes is None else strokes
 
 
 def encode_window(window: Window, command_id: str = '') -> bytes:
