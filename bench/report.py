@@ -23,7 +23,7 @@ PERFORMANCE = ROOT / 'docs' / 'performance.md'
 README = ROOT / 'README.md'
 # sections in this order; results files not listed here follow, by name
 ORDER = ['bench_contact', 'bench_dynamics', 'bench_cutoff', 'bench_speed_ab', 'bench_explore', 'bench_nodes',
-         'simulator_storms', 'bench_hil', 'bench_recorder', 'bench_soak', 'bench_long_logs', 'bench_node_work',
+         'simulator_storms', 'bench_hil', 'bench_recorder', 'bench_soak', 'bench_soak_run', 'bench_long_logs', 'bench_node_work',
          'bench_track', 'bench_parts', 'bench_parts_soak']
 # README's table: (results file, figure key, what README calls it)
 README_FIGURES = [

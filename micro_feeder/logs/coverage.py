@@ -22,13 +22,13 @@ from pathlib import Path
 
 from ..interface.names import split_receipt_frame
 from ..interface.stamps import header_frame_id
+from ..interface.topics import COMMAND_TOPICS
 from . import writer as w
 from .metadata import read_custom_data
 from .reader import LogReader
 
 POSE = 'particle/pose'
 RECEIPTS = 'simulator/command_receipts'
-COMMAND_TOPICS = ('actuator/trajectory', 'actuator/command')
 RECEIPT_MARGIN_NS = 50_000_000   # a receipt reaches the recorder about when its command does (50 ms margin)
 
 
@@ -171,7 +171,7 @@ def commands_against_receipts(log: LogReader, record: dict[str, str]) -> list[Mi
     out = []
     for topic in COMMAND_TOPICS:
         acknowledged = receipts.get(topic, [])
-        name = log.resolve(topic)
+        name = log.command_source(topic)
         lost = int(record.get(f'lost.{name}', 0) or 0) if name else 0
         if len(acknowledged) <= (log.topics[name].count if name else 0) + lost:
             continue    # nothing can be missing: the commands are not read (a long log holds thousands)

@@ -15,7 +15,7 @@ differently (ours with the stamp, ``rosbags`` and others with the receive time).
 Example, what ``resim`` needs::
 
     log = LogReader('out/run1')
-    for m in log.messages(['actuator/trajectory', 'actuator/command'], decoded=True):
+    for m in log.messages([log.command_source('actuator/trajectory')], decoded=True):
         print(m.topic, m.log_time, m.message)
 """
 
@@ -31,6 +31,7 @@ from mcap.records import Channel, Message, Schema
 from mcap_ros2.decoder import DecoderFactory
 
 from ..interface.stamps import header_stamp_ns
+from ..interface.topics import RECEIVED_COPIES
 from .mcap_file import Damage, McapFile, NotMcapError
 from .metadata import LogFormatError, read_file_list
 from .writer import RECORDER_METADATA
@@ -207,6 +208,13 @@ class LogReader:
             return '/' + topic
         matches = sorted(t for t in self.topics if t.endswith('/' + topic.lstrip('/')))
         return matches[0] if matches else None
+
+    def command_source(self, topic: str) -> str | None:
+        """The recorded topic that holds the commands sent on ``topic`` (``actuator/trajectory``): the
+        simulator's copy of each one it received (``simulator/trajectories_received``) when the log has it,
+        complete whatever senders the recorder had discovered, else ``topic`` itself; None when neither."""
+        copy = RECEIVED_COPIES.get(topic)
+        return (self.resolve(copy) if copy is not None else None) or self.resolve(topic)
 
     def messages(self, topics: Iterable[str] | None = None, *, start_ns: int | None = None,
                  end_ns: int | None = None, decoded: bool = False, reverse: bool = False) -> Iterator[LogMessage]:

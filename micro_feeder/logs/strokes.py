@@ -21,10 +21,9 @@ import numpy as np
 
 from ..interface.names import split_receipt_frame
 from ..interface.stamps import stamp_ns
+from ..interface.topics import COMMAND_TOPICS
 from ..physics.waveforms import StrokeSchedule, trajectory_table
 from .reader import LogReader
-
-COMMAND_TOPICS = ('actuator/trajectory', 'actuator/command')
 
 
 @dataclass
@@ -44,7 +43,7 @@ def commanded_strokes(log: LogReader, n_actuators: int, pose_log_t: np.ndarray, 
                       ) -> CommandedStrokes | None:
     """The strokes the log's commands describe, or None when it recorded no command. ``pose_log_t`` /
     ``pose_t``: receive times [s since log start] and stamps [s] of the poses, for logs without receipts."""
-    topics = [t for t in COMMAND_TOPICS if log.resolve(t) is not None]
+    topics = [t for t in COMMAND_TOPICS if log.command_source(t) is not None]
     if not topics:
         return None
     receipts: dict[str, list[float]] = defaultdict(list)
@@ -53,7 +52,7 @@ def commanded_strokes(log: LogReader, n_actuators: int, pose_log_t: np.ndarray, 
             receipts[split_receipt_frame(m.message.frame_id)[0]].append(stamp_ns(m.message.stamp) * 1e-9)
     commands = []
     for topic in topics:
-        for i, m in enumerate(log.messages([topic])):
+        for i, m in enumerate(log.messages([log.command_source(topic)])):
             if i < len(receipts[topic]):
                 received = receipts[topic][i]
             elif len(pose_t):

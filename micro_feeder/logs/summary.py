@@ -15,6 +15,7 @@ import datetime
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..interface.topics import COMMAND_TOPICS
 from ..physics.dynamics import MODES
 from .coverage import Coverage, end_line, missing_command_lines, stall_lines
 from .reader import LogReader
@@ -22,7 +23,6 @@ from .sim_parameters import recorded_parameters, run_mode
 
 RECORDER_STATUS_PREFIX = 'recorder'
 RATE_MIN_COUNT = 10  # topics with fewer messages are events (commands, mode changes): no rate shown
-COMMAND_TOPICS = ('actuator/trajectory', 'actuator/command')
 DEFAULT_TICK = 2e-3  # s of sim time a tick can advance, without recorded parameters (1 kHz, real time)
 SIMULATOR_STATUS_SUFFIX = 'simulator: loop'
 
@@ -167,7 +167,7 @@ def missing_start(log: LogReader, part: PartState, recorder: dict[str, str]) -> 
         start.first_pose = part.first_stamp
     start.commands_received = _commands_received(log)
     held = lost = 0
-    for topic in filter(None, map(log.resolve, COMMAND_TOPICS)):
+    for topic in filter(None, map(log.command_source, COMMAND_TOPICS)):
         held += log.topics[topic].count
         lost += int(recorder.get(f'lost.{topic}', 0))
     start.commands = max(start.commands_received - held - lost, 0)

@@ -51,6 +51,7 @@ from visualization_msgs.msg import MarkerArray
 from ..interface import messages, stamps, wire
 from ..interface.names import joint_names, receipt_frame
 from ..interface.parts_messages import PartsMessages
+from ..interface.topics import RECEIVED_COPIES
 from ..interface.transitions import TransitionEncoder
 from ..physics.dynamics import Event, Observation, SimulationError
 from ..physics.parameters import ParameterError, ParamSpec
@@ -178,6 +179,8 @@ class Simulator(Node):
         self._pub_parameters = self._publisher(ParameterEvent, 'simulator/parameters', '~/parameters')
         self._pub_receipts = self._publisher(Header, 'simulator/command_receipts', '~/command_receipts')
         self._pub_status = self._publisher(DiagnosticArray, 'simulator/command_status', '~/command_status')
+        self._pub_received = {topic: self._publisher(COMMAND_TYPES[topic], copy, '~/' + copy.split('/')[-1])
+                              for topic, copy in RECEIVED_COPIES.items()}
         for topic, msg_type in COMMAND_TYPES.items():
             self.create_subscription(msg_type, topic, lambda data, t=topic: self._on_command(t, data),
                                      topic_qos(topic, COMMAND_QUEUE), raw=True)
@@ -323,7 +326,8 @@ class Simulator(Node):
         return all(pub.get_subscription_count() > 0 for pub in
                    (self._pub_pose, self._pub_twist, self._pub_wrench, self._pub_joints, self._pub_mode,
                     self._pub_transitions, self._pub_markers, self._pub_parameters, self._pub_receipts,
-                    self._pub_part_poses, self._pub_part_states, self._pub_part_transitions))
+                    self._pub_part_poses, self._pub_part_states, self._pub_part_transitions,
+                    *self._pub_received.values()))
 
     def destroy_node(self) -> None:
         """Stop the loop and intake threads (waiting up to :data:`STOP_TIMEOUT` each for work in
@@ -456,6 +460,8 @@ class Simulator(Node):
         stamp = stamps.header_stamp(data) if topic == 'actuator/trajectory' else 0.0
         command_id = stamps.header_frame_id(data) if topic == 'actuator/trajectory' else ''
         self._last_command_wall = time.monotonic()
+        if topic in self._pub_received:        # the copy a recorder holds whichever senders it discovered
+            self._pub_received[topic].publish(data)
         self._intake.submit(Received(topic, data, stamp, command_id=command_id))
 
     def _parse(self, received: Received) -> tuple[str, Any]:

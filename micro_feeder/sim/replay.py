@@ -23,6 +23,9 @@ What it reads from the log (all recorded by default, see docs/logs.md):
   stroke without a jump); a future stamp applies at the stamp (the Stepper decides, exactly as in the
   node). Without receipts (an older log) the receipt time is estimated as the stamp of the last pose
   recorded before the command, which is ambiguous by up to a tick.
+* ``simulator/trajectories_received``: the simulator's copy of every trajectory it received, when the log
+  has it (whatever senders the recorder had discovered), else ``actuator/trajectory`` as recorded; and
+  ``actuator/command``.
 * ``particle/pose``: the stop times and the reference trajectory. The simulator stops its integration
   at every published pose; the stamps are rounded to 1 ns, so the exact stop times are rebuilt as
   the simulator computed them, ``t + step_period`` per step (stepped mode, or ``real_time_factor`` 0),
@@ -50,6 +53,7 @@ from ..interface import trajectory_cdr
 from ..interface.cdr import read_pose_xz
 from ..interface.names import joint_names, split_receipt_frame
 from ..interface.stamps import header_frame_id, to_ns
+from ..interface.topics import COMMAND_TOPICS
 from ..logs.reader import LogMessage, LogReader
 from ..logs.sim_parameters import recorded_parameters
 from ..physics.dynamics import Observation, SimulationError
@@ -63,7 +67,6 @@ from .commands import (
 )
 from .stepper import Stepper
 
-COMMAND_TOPICS = ('actuator/trajectory', 'actuator/command')
 MAX_INTERMEDIATE_STEPS = 1_000_000  # unrecorded steps rebuilt between two recorded poses, at most
 MAX_ADVANCE = 0.5  # s of sim time per Stepper.advance call across a gap with no known stop (Ctrl-C stays quick)
 PROGRESS_EVERY = 256  # recorded poses between two progress calls
@@ -316,7 +319,8 @@ class LogRecording:
     def _recorded(self, topic: str) -> Iterator[LogMessage]:
         """The readable messages of a command topic, in log order (a trajectory's knots are read from its
         bytes when they have the actuator's layout; anything else must decode)."""
-        for m in self.log.messages([topic]):
+        source = self.log.command_source(topic)
+        for m in self.log.messages([source] if source else []):
             fast = topic == 'actuator/trajectory' and not needs_deserializing(trajectory_cdr.decode(m.data, MAX_POINTS))
             if fast or self.log.decodes(m):
                 self._counts['recorded'] = self._counts.get('recorded', 0) + 1
@@ -420,7 +424,7 @@ class _Pending:
 def _command_id(m: LogMessage) -> str:
     """A recorded command's identity: a trajectory's ``header.frame_id`` ('' for set-points and unnamed),
     read from its bytes."""
-    return header_frame_id(m.data) if m.topic.endswith('actuator/trajectory') else ''
+    return header_frame_id(m.data) if m.stamped else ''
 
 
 def open_recording(log: LogReader) -> LogRecording:
