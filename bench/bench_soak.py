@@ -325,7 +325,8 @@ def run_figures(r: dict) -> list[dict]:
                round(r['rtf_median'], 4), '', op='>=', target=0.99, note=f'min {r["rtf_min"]:.4f}'),
         figure('run_rss_mb_per_min', 'micro-feeder run --record: RSS growth', round(r['rss_mb_per_min'], 3), 'MB/min',
                op='<', target=RUN_RSS_TARGET, note=f'CPU {r["cpu_pct"]:.1f} % of a core'),
-        figure('run_lost', 'micro-feeder run --record: messages the recorder lost', r['lost'], '', op='<=', target=0,
+        figure('run_lost', 'micro-feeder run --record: messages the recorder lost', _count(r['lost']), '', op='<=',
+               target=0,
                note=f'{r["poses"]:,} poses, largest stamp gap {r["max_gap_ms"]:.3f} ms'),
         figure('run_resim_peak_mb', 'resim of that log: peak RSS', round(resim['peak_mb']), 'MB', op='<=',
                target=RESIM_RSS_TARGET, note=resim['killed'] or f'wall {resim["wall_s"]:.0f} s'),
@@ -363,7 +364,9 @@ def main() -> None:
         print(report(result), flush=True)
         figures += case_figures(result)
     print(f'load average after: {os.getloadavg()}')
-    results_json.save(args, 'bench_soak', 'Continuous strokes (soak)', figures, load_before=load,
+    title = ('Continuous strokes recorded in one process (run --record soak)' if args.cases == 'run'
+             else 'Continuous strokes (soak)')
+    results_json.save(args, 'bench_soak', title, figures, load_before=load,
                       seconds=time.perf_counter() - started,
                       purpose='stroke.count 0, streamed by the actuator to the simulator at 1 kHz, separate '
                               'processes, for minutes: real-time factor, CPU, memory growth, underruns.')
