@@ -86,9 +86,9 @@ def test_fifty_separate_actuator_starts_are_each_applied_and_logged_once(ros_con
     executor.add_node(watcher)
     actuators = []
     try:
-        wait_until(lambda: watcher.count_publishers('particle/pose') > 0
-                   and watcher.count_subscribers('particle/pose') >= 1, 120, executor=executor,
-                   what='simulator and recorder')
+        wait_until(lambda: all(watcher.count_publishers(topic) > 0 and watcher.count_subscribers(topic) >= 1
+                               for topic in ('particle/pose', 'simulator/trajectories_received')),
+                   120, executor=executor, what='simulator and recorder')
         for first in range(0, STARTS, AT_ONCE):
             batch = [start_process('actuator', '-r', f'__node:=actuator_{k}', '-p', 'stroke.count:=1')
                      for k in range(first, first + AT_ONCE)]
