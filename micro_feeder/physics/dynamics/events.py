@@ -10,9 +10,6 @@ import numpy as np
 from .._jit import jit, jit_inline
 from ..waveforms import channel_bounds
 from .layout import (
-    AUX_H,
-    AUX_HT,
-    AUX_HX,
     AUX_L,
     AUX_MAT_VX,
     AUX_MAT_VZ,
@@ -42,7 +39,7 @@ from .layout import (
     TAKE_OFF,
     KernelModel,
 )
-from .rhs import contact_load, evaluate, felt_range, material_load, sign, strokes_at, surface_here
+from .rhs import contact_load, evaluate, felt_range, sign, strokes_at, surface_graph, surface_load
 from .steppers import dopri5_dense, hermite, interpolant_reach
 
 JUMP_TOLERANCE = 1e-12   # relative (1 + |ẋ| in m/s): a stuck part's velocity and its material point's differ
@@ -343,10 +340,7 @@ def bounce_flight(rebound: float, x: float, xd: float, st: np.ndarray, base_acc:
     the surface falls away faster than the part). Successive bounces on a surface that moves little during
     them lose a factor e_n each, so their flights fall below ``bounce_min_flight`` after finitely many, and
     the last landing is plastic: chatter ends in finite time (at most the first flight / (1 − e_n) in all)."""
-    if model.half_thickness > 0.0:
-        material_load(x, xd, False, st, base_acc, model, aux)
-    else:
-        contact_load(x, xd, st, base_acc, model, aux)
+    surface_load(x, xd, False, st, base_acc, model, aux)
     pressing = aux[AUX_N] * aux[AUX_L] / model.mass
     return 2.0 * rebound / pressing if pressing > 0.0 else math.inf
 
@@ -359,24 +353,20 @@ def transition(which: int, t: float, y: np.ndarray, model: KernelModel, src: tup
     mode = iv[IV_MODE]
     base_acc = strokes_at(t, y, model, src, cur, st, aux, 0.0)
     if mode == FLYING:                                     # landing: landing.law, landing.restitution
-        if model.half_thickness > 0.0:                     # the surface's material moves along x too
-            material_load(y[0], 0.0, True, st, base_acc, model, aux)
-            h, hx, ht, vx = aux[AUX_H], aux[AUX_HX], aux[AUX_HT], aux[AUX_MAT_VX]
-            vz = aux[AUX_MAT_VZ] if model.landing_relative else 0.0
-            vx = vx if model.landing_relative else 0.0
-        else:
-            h, hx, _hxx, ht, _htt, _hxt = surface_here(y[0], st, model, aux)
-            vx, vz = 0.0, ht if model.landing_relative else 0.0
+        h, hx, ht = surface_graph(y[0], st, model, aux)
+        # the velocity of the surface's material point there (it moves along x too with surface.thickness)
+        material_vx, material_vz = (aux[AUX_MAT_VX], aux[AUX_MAT_VZ]) if model.half_thickness > 0.0 else (0.0, ht)
+        vx, vz = (material_vx, material_vz) if model.landing_relative else (0.0, 0.0)
         length = math.sqrt(1.0 + hx * hx)
         approach = abs(y[3] - ht - hx * y[1]) / length     # normal velocity relative to the surface (m/s)
         xd = vx + ((y[1] - vx) + hx * (y[3] - vz)) / (1.0 + hx * hx)
-        slip = xd - (aux[AUX_MAT_VX] if model.half_thickness > 0.0 else 0.0)   # relative to the material
+        slip = xd - material_vx                            # relative to the material
         if model.landing_law == LANDING_STICK:
             slip = 0.0
         elif model.landing_law == LANDING_COULOMB:     # |Δv_t| ≤ μ |Δv_n|, Δv_n = (1 + e_n)·approach
             impulse = (1.0 + model.restitution) * approach
             slip = sign(slip) * max(abs(slip) - model.landing_mu * impulse / length, 0.0)
-        xd = slip + (aux[AUX_MAT_VX] if model.half_thickness > 0.0 else 0.0)
+        xd = slip + material_vx
         rebound = model.restitution * approach
         if rebound > 0.0 and bounce_flight(rebound, y[0], xd, st, base_acc, model, aux) >= model.bounce_min_flight:
             y[1] = xd - hx * rebound / length              # tangential xd·L along the surface, rebound along n
@@ -395,22 +385,14 @@ def transition(which: int, t: float, y: np.ndarray, model: KernelModel, src: tup
         enter(iv, fs, t, SLIDING if slip != 0.0 else STUCK, IV_LANDING, grazing)
         return LANDING
     if which == 1:                                         # take-off with the contact velocity
-        if model.half_thickness > 0.0:
-            material_load(y[0], y[1], mode == STUCK, st, base_acc, model, aux)
-            h, hx, ht = aux[AUX_H], aux[AUX_HX], aux[AUX_HT]
-        else:
-            h, hx, _hxx, ht, _htt, _hxt = surface_here(y[0], st, model, aux)
+        h, hx, ht = surface_graph(y[0], st, model, aux)
         y[2] = h
         y[3] = ht + hx * y[1]
         iv[IV_FRESH] = 1
         enter(iv, fs, t, FLYING, IV_TAKE_OFF, grazing)
         return TAKE_OFF
-    if model.half_thickness > 0.0:                         # at rest on its material point
-        material_load(y[0], 0.0, True, st, base_acc, model, aux)
-        y[1] = aux[AUX_MAT_VX]
-    else:
-        y[1] = 0.0
-        contact_load(y[0], 0.0, st, base_acc, model, aux)
+    surface_load(y[0], 0.0, True, st, base_acc, model, aux)   # at rest on the surface (its material point)
+    y[1] = aux[AUX_MAT_VX] if model.half_thickness > 0.0 else 0.0
     if mode == STUCK:                                      # friction opposes the impending motion
         iv[IV_DIR] = -sign(aux[AUX_T_REQ])
         iv[IV_FRESH] = 1

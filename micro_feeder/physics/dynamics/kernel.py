@@ -72,9 +72,8 @@ from .rhs import (
     interp,
     locate_all,
     margin_slopes,
-    material_load,
     strokes_at,
-    surface_here,
+    surface_graph,
     wave_step,
 )
 from .steppers import dopri5_dense, dopri5_error, dopri5_step, rk4_step
@@ -97,11 +96,7 @@ def observe(t: float, y: np.ndarray, iv: np.ndarray, model: KernelModel, src: tu
     for k in range(model.n_actuators):
         row[N_FIXED_COLUMNS + k] = st[0, k]
     if mode == FLYING:
-        if model.half_thickness > 0.0:          # the surface as a graph over x, under the part
-            material_load(y[0], 0.0, True, st, 0.0, model, aux)
-            h, ht = aux[AUX_H], aux[AUX_HT]
-        else:
-            h, _hx, _hxx, ht, _htt, _hxt = surface_here(y[0], st, model, aux)
+        h, _hx, ht = surface_graph(y[0], st, model, aux)
         row[C_Z] = y[2]
         row[C_ZD] = y[3]
         row[C_FRICTION] = 0.0

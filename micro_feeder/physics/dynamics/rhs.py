@@ -389,6 +389,29 @@ def material_evaluate(mode: int, direction: int, y: np.ndarray, model: KernelMod
     return direction * aux[AUX_SLIP], adhesion_margin
 
 
+@jit_inline
+def surface_load(x: float, xd: float, stuck: bool, st: np.ndarray, base_acc: float, model: KernelModel,
+                 aux: np.ndarray) -> None:
+    """:func:`contact_load` on whichever surface the model has: with surface.thickness its material points
+    move along x too (:func:`material_load`; ``stuck``: the part rides its material point)."""
+    if model.half_thickness > 0.0:
+        material_load(x, xd, stuck, st, base_acc, model, aux)
+    else:
+        contact_load(x, xd, st, base_acc, model, aux)
+
+
+@jit_inline
+def surface_graph(x: float, st: np.ndarray, model: KernelModel, aux: np.ndarray) -> tuple[float, float, float]:
+    """The surface under ``x`` (m) as a graph z = h(x, t): height (m), slope dz/dx and rate ∂h/∂t at fixed x
+    (m/s), on whichever surface the model has; with surface.thickness ``aux`` also gets the material point
+    under x and its velocity (AUX_MAT_*, :func:`material_load`)."""
+    if model.half_thickness > 0.0:
+        material_load(x, 0.0, True, st, 0.0, model, aux)
+        return aux[AUX_H], aux[AUX_HX], aux[AUX_HT]
+    h, hx, _hxx, ht, _htt, _hxt = surface_here(x, st, model, aux)
+    return h, hx, ht
+
+
 @jit
 def closest_material_point(x: float, z: float, st: np.ndarray, model: KernelModel, aux: np.ndarray) -> None:
     """:func:`closest_point` on the curve P(X) = (X + u, h) of surface.thickness: Newton on (P − p)·P_X = 0
