@@ -23,8 +23,8 @@ PERFORMANCE = ROOT / 'docs' / 'performance.md'
 README = ROOT / 'README.md'
 # sections in this order; results files not listed here follow, by name
 ORDER = ['bench_contact', 'bench_dynamics', 'bench_cutoff', 'bench_speed_ab', 'bench_explore', 'bench_nodes',
-         'simulator_storms', 'bench_hil', 'bench_recorder', 'bench_soak', 'bench_soak_run', 'bench_long_logs', 'bench_node_work',
-         'bench_track', 'bench_parts', 'bench_parts_soak']
+         'simulator_storms', 'bench_hil', 'bench_recorder', 'bench_soak', 'bench_soak_run', 'bench_long_logs',
+         'bench_node_work', 'bench_track', 'bench_parts', 'bench_parts_soak']
 # README's table: (results file, figure key, what README calls it)
 README_FIGURES = [
     ('bench_contact', 'first_build_ms', 'contact model tables, first build'),

@@ -57,8 +57,6 @@ class StrokeStream:
         self._max_points = points_per_message(max_points, n_actuators)
         self._max_spacing = max_spacing(params, knots_per_stroke)
         self._ramp_from: int | None = None                 # burst time (ns) a re-phased stream's next window starts
-        self.last_positions = np.zeros(n_actuators)        # strokes at the last knot sent (m): what a simulator
-                                                           # holds once the stream runs out
         self._last_now: float | None = None                # sim time of the last follow() (s)
         self.windows_made = 0                              # windows returned by next_window(): the k of w<k>
         self._rephased_after = 0                           # windows made before the last re-phase (in flight)
@@ -88,7 +86,6 @@ class StrokeStream:
             self._window_ns = max(int(ns[-1]) - start, 1)
         self.sent_ns = int(ns[-1])
         self.windows_made += 1
-        self.last_positions = values[0, -1].copy()
         if self._ramp_from is not None:      # stamped where the ramp starts; its first knot one ramp later
             start, self._ramp_from = self._ramp_from, None
         return self.origin_ns + start, ns - start, values
