@@ -34,6 +34,7 @@ STATE = [
     ('surface/markers', 'visualization_msgs/MarkerArray', 'reliable, volatile, depth 1'),
     ('simulator/parameters', 'rcl_interfaces/ParameterEvent', 'reliable, transient local, depth 1'),
     ('simulator/command_receipts', 'std_msgs/Header', 'reliable, volatile, depth 100'),
+    ('simulator/trajectories_received', 'trajectory_msgs/JointTrajectory', 'reliable, volatile, depth 100'),
     ('simulator/command_status', 'diagnostic_msgs/DiagnosticArray', 'reliable, volatile, depth 100'),
     ('/clock', 'rosgraph_msgs/Clock', 'best effort, volatile, depth 1'),
     ('/diagnostics', 'diagnostic_msgs/DiagnosticArray', 'reliable, volatile, depth 10'),
