@@ -42,14 +42,8 @@ def command_status(t: float, frame_id: str, name: str, topic: str, command_id: s
 def header_bytes(t: float, frame_id: str) -> bytes:
     """A ``std_msgs/Header`` stamped at sim time ``t`` (s) with ``frame_id``, as CDR bytes: the simulator's
     command receipts, up to ~200 a second with 64 actuators streaming (an rclpy Header cost ~40 µs each)."""
-    return ENCAPSULATION + STAMP.pack(*stamp_parts(t)) + _string_bytes(frame_id)
-
-
-@functools.cache
-def _string_bytes(text: str) -> bytes:
-    """``text`` as a CDR string that starts 4-aligned (length, bytes, NUL)."""
-    payload = bytearray()
-    put_string(payload, text)
+    payload = bytearray(ENCAPSULATION + STAMP.pack(*stamp_parts(t)))
+    put_string(payload, frame_id)      # every receipt's frame is new (it names the command): nothing to cache
     return bytes(payload)
 
 

@@ -10,7 +10,7 @@ FEEDER_FRAME = 'feeder'     # x along the feeder, z up, y to the left
 CONTACT_FRAME = 'contact'   # at the part: x along the surface tangent, z along its normal
 
 __all__ = ['CONTACT_FRAME', 'FEEDER_FRAME', 'MODES', 'TRANSITION_KINDS', 'joint_names', 'receipt_frame',
-           'split_receipt_frame']
+           'split_receipt_frame', 'split_window_id', 'window_id']
 
 
 def joint_names(n_actuators: int) -> list[str]:
@@ -31,3 +31,19 @@ def split_receipt_frame(frame_id: str) -> tuple[str, str]:
     """(topic, command identity or '') of a receipt's ``frame_id`` (:func:`receipt_frame`)."""
     topic, _, command_id = frame_id.partition(RECEIPT_ID_SEPARATOR)
     return topic, command_id
+
+
+WINDOW_MARK = ':w'      # a stream window's identity: <stream>:w<k>, k = 1, 2, ... in the order sent
+
+
+def window_id(stream: str, window: int) -> str:
+    """The identity of window number ``window`` (1 = the first) of the stream named ``stream``."""
+    return f'{stream}{WINDOW_MARK}{window}'
+
+
+def split_window_id(command_id: str) -> tuple[str, int] | None:
+    """(stream, window number) of a stream window's identity (:func:`window_id`), None for any other."""
+    stream, mark, number = command_id.rpartition(WINDOW_MARK)
+    if not mark or not stream or not number.isdigit():
+        return None
+    return stream, int(number)

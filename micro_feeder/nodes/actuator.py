@@ -19,7 +19,6 @@ burst's length.
 
 from __future__ import annotations
 
-import re
 import time
 from collections.abc import Mapping
 from typing import Any
@@ -38,7 +37,7 @@ from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
 from ..interface import stamps, trajectory_cdr
-from ..interface.names import joint_names
+from ..interface.names import joint_names, split_window_id, window_id
 from ..physics.parameters import ParamSpec
 from ..physics.waveforms import StrokeParams
 from ..settings import model_specs
@@ -152,7 +151,8 @@ class Actuator(Node):
     def _command_id(self, window: int | None = None) -> str:
         """The identity of a command this node sends (its trajectory's header.frame_id): node, process start,
         burst and window, so that the simulator applies each once and the log and the receipts name it."""
-        return f'{self._instance}:b{self.bursts}' + (f':w{window}' if window is not None else '')
+        burst = f'{self._instance}:b{self.bursts}'
+        return burst if window is None else window_id(burst, window)
 
     def _simulator_subscriptions(self) -> frozenset[bytes] | None:
         """Endpoint ids of the ``actuator/trajectory`` subscriptions of simulators (nodes that also publish
@@ -248,11 +248,11 @@ class Actuator(Node):
         was not applied (late, or continuing one that was; a duplicate's first copy was applied), re-phase the
         stream, so that what follows is applied (:meth:`StrokeStream.refused`); the
         windows already sent after it are refused as well."""
-        match = re.fullmatch(r':b(\d+):w(\d+)', command_id.removeprefix(self._instance))
-        if (match is None or int(match[1]) != self.bursts or self._stream is None or self.sim_time is None
+        window = split_window_id(command_id)
+        if (window is None or window[0] != self._command_id() or self._stream is None or self.sim_time is None
                 or DUPLICATE in reason):
             return
-        why = self._stream.refused(int(match[2]), self.sim_time, self.get_parameter('stream.lead').value)
+        why = self._stream.refused(window[1], self.sim_time, self.get_parameter('stream.lead').value)
         if why is not None:
             self.rephases += 1
             self.get_logger().warning(f'stream re-phased: {why}', throttle_duration_sec=5.0)

@@ -10,35 +10,33 @@ the parameters and of the (time, command) sequence, which makes a stepped run re
 from __future__ import annotations
 
 import functools
-import re
-from collections import OrderedDict
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
+from ..interface.names import split_window_id, window_id
 from ..physics.contact import ContactLaw, ContactParams, contact_law
 from ..physics.dynamics import EventList, FeederModel, FeederState, Observation
 from ..physics.particle import ParticleParams
 from ..physics.parts import PartsModel, PartsState
 from ..physics.trajectory import CommandLimits, check_table
 from ..physics.waveforms import StrokeSchedule, trajectory_table
+from .applied import AppliedCommands
 from .commands import DUPLICATE, CommandRejected, TrajectoryCommand, start_time
 
-REMEMBERED_COMMANDS = 100_000    # identities of applied commands kept for refusing duplicates (~6 min of windows)
 JOIN_TOLERANCE = (1e-9, 1e-5)    # m, m/s: a late trajectory joins the stroke in force only this close to it
 LEFT_LIMIT_S = 1e-12             # s: "just before" a window's start (knots are whole ns; stamp + offset and the
                                  # next stamp differ by rounding, ~1e-18 s)
-WINDOW_ID = re.compile(r'^(?P<stream>.+):w(?P<window>\d+)$')   # a stream window's identity: <stream>:w<k>
 
 
 def previous_window(command_id: str) -> str | None:
     """The identity of the window that ``command_id`` continues (``<stream>:w<k-1>`` for ``<stream>:w<k>``,
     k ≥ 2), or None when it names no stream window (docs/interface.md, *Commands*)."""
-    match = WINDOW_ID.match(command_id)
-    if match is None or int(match['window']) < 2:
+    window = split_window_id(command_id)
+    if window is None or window[1] < 2:
         return None
-    return f"{match['stream']}:w{int(match['window']) - 1}"
+    return window_id(window[0], window[1] - 1)
 
 
 @functools.lru_cache(maxsize=4)
@@ -66,7 +64,7 @@ class Stepper:
 
     def __init__(self, model: FeederModel):
         self.model = model
-        self.applied: OrderedDict[str, float] = OrderedDict()   # command identity: sim time applied (s)
+        self.applied = AppliedCommands()
         self.reset()
         self._warm_up()
 
@@ -147,8 +145,9 @@ class Stepper:
         (:meth:`_check_late_join`); and when it continues a stream window but would jump the stroke at its start
         (:meth:`_check_continuation`)."""
         if cmd.command_id in self.applied:
-            raise CommandRejected(f'trajectory {cmd.command_id}: {DUPLICATE} at '
-                                  f't = {self.applied[cmd.command_id]:.9f} s, not applied again')
+            t_applied = self.applied.applied_at(cmd.command_id)
+            when = 'before' if t_applied is None else f'at t = {t_applied:.9f} s'
+            raise CommandRejected(f'trajectory {cmd.command_id}: {DUPLICATE} {when}, not applied again')
         t0 = start_time(cmd.stamp, self.state.t)
         if not cmd.is_stop and 0.0 < cmd.stamp < t0:
             self._check_late_join(cmd, t0)
@@ -167,9 +166,7 @@ class Stepper:
                 raise CommandRejected(f'trajectory: {reason}')
         self._prune()
         if cmd.command_id:
-            self.applied[cmd.command_id] = t0
-            if len(self.applied) > REMEMBERED_COMMANDS:
-                self.applied.popitem(last=False)
+            self.applied.add(cmd.command_id, t0)
         return t0
 
     def _check_late_join(self, cmd: TrajectoryCommand, t0: float) -> None:
