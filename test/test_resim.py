@@ -12,11 +12,15 @@ import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
 import rclpy
+from action_msgs.msg import GoalStatus
+from control_msgs.action import FollowJointTrajectory
 from node_helpers import Probe
+from rclpy.action import ActionClient
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
@@ -127,6 +131,80 @@ def test_stepped_log_resimulates_bit_for_bit(stepped_log: Path) -> None:
     assert report.exact_stop_times and report.receipts == 'recorded' and report.mode == 'stepped'
     assert report.max_error == 0.0 and report.identical, report.verdict()
     assert report.parameters.startswith('recorded')
+
+
+def _record_goal_driven_run(context: Context, path: Path) -> dict[str, int]:
+    """A stepped run driven only by FollowJointTrajectory goals: one replaced by the next, one stamped ahead,
+    one refused, one canceled (the simulator holds the strokes). Returns the goals' error codes by name."""
+    recorder = Recorder(context=context, parameter_overrides=[Parameter('output', value=str(path)),
+                                                              Parameter('flush_period', value=0.2)])
+    sim = Simulator(context=context, overrides={'start_paused': True, 'step_period': STEP})
+    probe = Probe(context=context)
+    client = ActionClient(probe, FollowJointTrajectory, 'simulator/follow_joint_trajectory')
+    executor = SingleThreadedExecutor(context=context)
+    for node in (recorder, sim, probe):
+        executor.add_node(node)
+
+    def wait(predicate, what: str) -> None:
+        wait_until(predicate, TIMEOUT, executor=executor, what=what)
+
+    def send(trajectory: object) -> tuple[Any, Any]:
+        """The goal's handle and its result's future, once the simulator has received it."""
+        count = recorder.received['/simulator/command_receipts']
+        future = client.send_goal_async(FollowJointTrajectory.Goal(trajectory=trajectory))
+        wait(future.done, 'goal answered')
+        wait(lambda: recorder.received['/simulator/command_receipts'] == count + 1, 'receipt of the goal')
+        return future.result(), future.result().get_result_async()
+
+    codes: dict[str, int] = {}
+    try:
+        wait(lambda: client.server_is_ready() and sim.count_subscribers('particle/pose') == 2
+             and sim.count_subscribers('simulator/trajectories_received') == 2
+             and sim.count_subscribers('simulator/command_receipts') == 2
+             and recorder.received['/simulator/parameters'] == 1, 'recorder, probe and action client matched')
+        at_start = recorder.received['/particle/pose']
+        _, replaced = send(_burst(0.0))                    # 4 ms of strokes
+        probe.step(executor, 30)
+        _, ahead = send(_hold(0.0093, 30e-6))              # replaces the burst at 3 ms; runs from t = 9.3 ms
+        probe.step(executor, 90)
+        _, refused = send(_hold(0.0, 1.0))                 # outside the piezo travel
+        running, canceled = send(_burst(0.0))
+        probe.step(executor, 30)
+        count = recorder.received['/simulator/command_receipts']
+        cancel = running.cancel_goal_async()
+        wait(lambda: cancel.done() and canceled.done(), 'goal canceled')
+        wait(lambda: recorder.received['/simulator/command_receipts'] == count + 1, 'receipt of the hold')
+        probe.step(executor, 50)
+        for name, future in (('replaced', replaced), ('ahead', ahead), ('refused', refused), ('canceled', canceled)):
+            wait(future.done, f'result of the {name} goal')
+            codes[name] = future.result().status
+        wait(lambda: recorder.received['/particle/pose'] == at_start + 200, 'every pose recorded')
+    finally:
+        executor.shutdown()
+        recorder.close()
+        client.destroy()
+        for node in (probe, sim, recorder):
+            node.destroy_node()
+    return codes
+
+
+def test_a_goal_driven_log_resimulates_bit_for_bit(tmp_path: Path) -> None:
+    """FollowJointTrajectory goals reach the log as the simulator's copies and receipts, so a run driven by
+    goals alone re-simulates exactly, the cancel's hold included."""
+    context = Context()
+    rclpy.init(context=context)
+    try:
+        codes = _record_goal_driven_run(context, tmp_path / 'goals')
+    finally:
+        rclpy.shutdown(context=context)
+    assert codes == {'replaced': GoalStatus.STATUS_ABORTED, 'ahead': GoalStatus.STATUS_SUCCEEDED,
+                     'refused': GoalStatus.STATUS_ABORTED, 'canceled': GoalStatus.STATUS_CANCELED}
+    log = LogReader(tmp_path / 'goals')
+    assert '/actuator/trajectory' not in log.topics
+    report = resimulate(log)
+    assert report.commands_applied == 4 and report.commands_rejected == 1, report.verdict()
+    assert len({m.message.pose.position.x for m in log.messages(['particle/pose'])}) > 10
+    assert report.max_error == 0.0 and report.identical, report.verdict()
 
 
 def test_a_changed_parameter_shows_as_a_difference(stepped_log: Path) -> None:

@@ -31,6 +31,7 @@ import sys
 import threading
 import time
 from collections.abc import Iterable, Mapping, Sequence
+from copy import deepcopy
 from typing import Any
 
 import numpy as np
@@ -189,6 +190,8 @@ class Simulator(Node):
 
         self.commands = IntakeCounters()
         self.command_serial = 0     # +1 for every command applied and every reset: what replaced a goal's strokes
+        self._instance = f'{self.get_fully_qualified_name()}@{time.time_ns():x}'   # names goals without a name
+        self._goals_followed = 0
         self._last_command_wall: float | None = None   # time.monotonic() of the last command received
         self._stream_open = False       # the last trajectory applied was a stream's window (stamped, not empty)
         self._refusal_log = ThrottledLog()
@@ -654,17 +657,52 @@ class Simulator(Node):
         with self._locked(self._lock):
             return self._stepper.observe_parts()
 
-    def follow(self, command: TrajectoryCommand) -> tuple[int, float]:
-        """Apply a checked trajectory as one received on ``actuator/trajectory`` now would be (a
-        FollowJointTrajectory goal's), after the commands received before it; returns (its
-        :attr:`command_serial`, its start in sim time (s)). Raises :class:`CommandRejected` (the interpolation
-        leaves the travel, a duplicate, a late join that would jump) or :class:`Busy`."""
+    def follow(self, message: JointTrajectory | None = None) -> tuple[int, float, TrajectoryCommand]:
+        """Check and apply a FollowJointTrajectory goal's trajectory (None: an empty one, which holds the
+        strokes) as the same message received on ``actuator/trajectory`` now would be, after the commands
+        received before it; returns (its :attr:`command_serial`, its start in sim time (s), the command).
+        Like a topic command it is copied on ``simulator/trajectories_received`` and acknowledged on
+        ``simulator/command_receipts``, applied or refused, named by its ``header.frame_id`` or, without one,
+        ``<node>@<start>:fjt<k>``: a log of a goal-driven run replays. Raises ValueError with the reason
+        (:class:`CommandRejected` from the schedule: the interpolation leaves the travel, a duplicate, a late
+        join that would jump) or :class:`Busy` (then nothing was received)."""
+        copy = JointTrajectory(joint_names=self.joints) if message is None else deepcopy(message)
+        if not copy.header.frame_id:
+            self._goals_followed += 1
+            copy.header.frame_id = f'{self._instance}:fjt{self._goals_followed}'
+        generation = self._generation
+        parsed = self._parse_goal(copy)                     # outside the lock: a long goal takes a while
+        received = Received('actuator/trajectory', b'', stamps.seconds(copy.header.stamp),
+                            command_id=copy.header.frame_id)
         with self._locked(self._intake.busy), self._locked(self._lock):
             self._intake.drain()
-            start = self._stepper.command_trajectory(command)
-            self._stream_open = False
-            self.command_serial += 1
-            return self.command_serial, start
+            if generation != self._generation:              # a reset changed the model while parsing
+                parsed = self._parse_goal(copy)
+            self.commands.received += 1
+            self._pub_received['actuator/trajectory'].publish(copy)
+            t = self._stepper.t
+            try:
+                if isinstance(parsed, ValueError):
+                    raise parsed
+                start = self._stepper.command_trajectory(parsed)
+            except ValueError as err:
+                self._refuse(str(err))
+                refusal = err
+            else:
+                refusal = None
+                self._stream_open = False
+                self.command_serial += 1
+                serial = self.command_serial
+        self._acknowledge(received, t)
+        if refusal is not None:
+            raise refusal
+        return serial, start, parsed
+
+    def _parse_goal(self, message: JointTrajectory) -> TrajectoryCommand | ValueError:
+        try:
+            return parse_trajectory(message, self.joints, self._stepper.limits)
+        except ValueError as err:
+            return err
 
     def strokes(self, t: float | None = None) -> tuple[np.ndarray, Observation]:
         """((3, joints) commanded s, ṡ, s̈ at ``t`` (s; default now), the state now), under the lock; raises

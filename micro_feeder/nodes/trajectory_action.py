@@ -43,7 +43,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from ..interface import stamps
 from ..physics.dynamics import Observation
-from ..sim.commands import TrajectoryCommand, parse_trajectory
+from ..sim.commands import TrajectoryCommand
 from .sim_control import FEEDBACK_QOS, Busy, Yield
 
 Result = FollowJointTrajectory.Result
@@ -63,7 +63,7 @@ class FollowingSimulator(Protocol):
 
     def limits(self) -> tuple[float, float]: ...
 
-    def follow(self, command: TrajectoryCommand) -> tuple[int, float]: ...
+    def follow(self, message: JointTrajectory | None = None) -> tuple[int, float, TrajectoryCommand]: ...
 
     def strokes(self, t: float | None = None) -> tuple[np.ndarray, Observation]: ...
 
@@ -117,15 +117,14 @@ class TrajectoryAction:
         if request.multi_dof_trajectory.points or request.multi_dof_trajectory.joint_names:
             return self._refuse(goal, Result.INVALID_GOAL, 'multi_dof_trajectory: the actuators are single joints')
         trajectory: JointTrajectory = request.trajectory
-        reason = check_joints(list(trajectory.joint_names), joints)
-        if reason:
-            return self._refuse(goal, Result.INVALID_JOINTS, reason)
         try:
-            command = parse_trajectory(trajectory, joints, self._sim.limits())
-            serial, start = self._sim.follow(command)
+            serial, start, command = self._sim.follow(trajectory)
         except Busy as err:
             return self._refuse(goal, Result.INVALID_GOAL, str(err))
         except ValueError as err:
+            reason = check_joints(list(trajectory.joint_names), joints)
+            if reason:
+                return self._refuse(goal, Result.INVALID_JOINTS, reason)
             code = Result.OLD_HEADER_TIMESTAMP if 'ended before it arrived' in str(err) else Result.INVALID_GOAL
             return self._refuse(goal, code, str(err))
         base = start if command.stamp == 0.0 else command.stamp
@@ -179,7 +178,7 @@ class TrajectoryAction:
         """Hold the strokes where they are (an empty trajectory: the topic's stop); '' when the simulator took
         it, else why not."""
         try:
-            self._sim.follow(TrajectoryCommand(0.0, np.zeros(0), np.zeros((0, len(self._sim.joints))), None, None))
+            self._sim.follow()
         except (Busy, ValueError) as err:
             return str(err)
         return ''
