@@ -139,3 +139,46 @@ def test_endless_burst_streamed_to_a_stepped_simulator_follows_the_waveform(ros_
     finally:
         ex.shutdown()
         sim.destroy_node()
+
+
+def test_bursts_as_follow_joint_trajectory_goals(ros_context: Context) -> None:
+    """command_interface action: each burst is one goal; the actuator learns that it ran to its end, why
+    one was refused (its diagnostics say it), and a stop cancels the running goal. A streamed burst is
+    refused at start, nothing sent."""
+    sim = Simulator(context=ros_context, overrides={'start_paused': True})
+    actuator, probe, ex = _rig(ros_context, auto_start=False, command_interface='action', **{'stroke.count': 3})
+    ex.add_node(sim)
+    goals = actuator.goals
+    try:
+        wait_until(goals.ready, 10.0, executor=ex, what='the action server')
+        response = probe.call(ex, Trigger, 'actuator/start')
+        assert response.success and 'FollowJointTrajectory goal' in response.message
+        wait_until(lambda: goals.state == 'running', 10.0, executor=ex, what='the goal running')
+        probe.step(ex, 5)                                        # 3 strokes at 1 kHz: 3.25 ms
+        wait_until(lambda: goals.succeeded == 1, 10.0, executor=ex, what='the goal succeeded')
+        assert actuator._command_id() in sim.stepper.applied and not probe.msgs['actuator/trajectory']
+
+        actuator.set_parameters([Parameter('stroke.amplitude', value=900e-6)])   # beyond the piezo travel
+        assert probe.call(ex, Trigger, 'actuator/start').success
+        wait_until(lambda: goals.refused == 1, 10.0, executor=ex, what='the goal refused')
+        assert goals.state == 'aborted' and 'piezo' in goals.last and actuator._command_id() in goals.last
+        actuator._publish_diagnostics()
+        statuses = lambda: [s for m in probe.msgs['/diagnostics'] for s in m.status if s.name.startswith('actuator')]  # noqa: E731
+        wait_until(statuses, 10.0, executor=ex, what='diagnostics')
+        status = statuses()[-1]
+        assert status.level == status.WARN and {'goals_sent': '2', 'commands_refused': '1'}.items() <= \
+            {kv.key: kv.value for kv in status.values}.items()
+
+        actuator.set_parameters([Parameter('stroke.amplitude', value=50e-6), Parameter('stroke.count', value=50)])
+        probe.call(ex, Trigger, 'actuator/start')
+        wait_until(lambda: goals.state == 'running', 10.0, executor=ex, what='the third goal running')
+        probe.step(ex, 2)
+        assert probe.call(ex, Trigger, 'actuator/stop').message == 'cancel sent'
+        wait_until(lambda: goals.canceled == 1, 10.0, executor=ex, what='the goal canceled')
+        assert 'nothing to stop' in probe.call(ex, Trigger, 'actuator/stop').message
+
+        actuator.set_parameters([Parameter('stroke.count', value=0)])
+        response = probe.call(ex, Trigger, 'actuator/start')
+        assert not response.success and 'whole bursts only' in response.message and goals.sent == 3
+    finally:
+        ex.shutdown()

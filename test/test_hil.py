@@ -193,6 +193,31 @@ def test_a_slow_controller_reaches_the_same_state_in_lockstep(ros_context: Conte
     assert finals[0.02] == finals[0.0]
 
 
+def test_goals_give_the_lockstep_run_that_topic_commands_give(ros_context: Context):
+    """command_interface action: each burst a FollowJointTrajectory goal, the grant sent once the simulator
+    has handled it. The lockstep run ends in the same state, to the last bit, as with actuator/trajectory."""
+    from micro_feeder.nodes.feed_controller import FeedController
+    from micro_feeder.nodes.simulator import Simulator
+    from micro_feeder.nodes.spin import spin_nodes
+
+    finals = {}
+    for interface in ('topic', 'action'):
+        sim = Simulator(context=ros_context, overrides={'lockstep': True})
+        controller = FeedController(context=ros_context, overrides={'feed.target_x': 0.46e-3, 'lockstep': True,
+                                                                     'command_interface': interface})
+        try:
+            spin_nodes([sim, controller], lambda c=controller, s=sim: c.done or s.stepper.t > 1.0, ros_context)
+            state = sim.stepper.state
+            finals[interface] = (controller.planner.status, state.t, state.x, state.xdot, controller.commands_sent,
+                                 sim.commands.received)
+        finally:
+            controller.destroy_node()
+            sim.destroy_node()
+    assert finals['topic'][0] == 'reached' and finals['topic'][4] >= 2
+    assert finals['action'] == finals['topic']
+    assert controller.goals.sent == controller.commands_sent and controller.goals.refused == 0
+
+
 def test_timeout_stops_at_the_requested_sim_time():
     result = run_hil('--timeout', '0.01', '--set', 'feed.target_x=0.9e-3')
     assert not result['reached'] and result['sim_time_s'] == 0.01, result

@@ -36,7 +36,7 @@ from std_msgs.msg import Header
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
 
-from ..interface import stamps, trajectory_cdr
+from ..interface import messages, stamps, trajectory_cdr
 from ..interface.names import joint_names, split_window_id, window_id
 from ..physics.parameters import ParamSpec
 from ..physics.waveforms import StrokeParams
@@ -44,6 +44,7 @@ from ..settings import model_specs
 from ..sim.commands import DUPLICATE
 from ..sim.stream import StrokeStream, encode_stop, encode_window, points_per_message, sample_waveform
 from ._ros import RefusalWatch, topic_qos
+from .goal_sender import COMMAND_INTERFACES, GoalSender
 from .parameters import check_changes, declare, values
 from .spin import spin_node
 
@@ -58,6 +59,9 @@ NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
     'stream.window': (ParamSpec('sim time one streamed message covers at most', 's', gt=0, le=10.0), 0.02),
     'stream.lead': (ParamSpec('a streamed burst is kept scheduled this far ahead of sim time', 's', gt=0, le=10.0),
                     0.2),
+    'command_interface': (ParamSpec('how bursts are sent: "topic" (actuator/trajectory, whole or streamed) or '
+                                    '"action" (each burst one FollowJointTrajectory goal: whole bursts only)',
+                                    kind='str', choices=COMMAND_INTERFACES, read_only=True), 'topic'),
 }
 ACK_TIMEOUT_S = 1.0    # s an actuator that stops waits for its subscribers to acknowledge what it sent
 GRAPH_SETTLE_S = 0.5   # s the trajectory topic's subscriptions must stay the same before an auto start
@@ -91,6 +95,7 @@ class Actuator(Node):
         self._pending_stream = False                 # streamed start waiting for the first sim time
         self._instance = f'{self.get_fully_qualified_name()}@{time.time_ns():x}'   # names this run's commands
         self.refusals = RefusalWatch(self, self._instance + ':', self._on_refused)   # the simulator's answers
+        self.goals = GoalSender(self) if self.get_parameter('command_interface').value == 'action' else None
         self._graph_seen: frozenset[bytes] | None = None   # the trajectory subscriptions seen ready, and since when
         self._graph_since = 0.0
         self._simulators: frozenset[bytes] = frozenset()   # trajectory subscriptions of the simulators reached
@@ -118,10 +123,13 @@ class Actuator(Node):
 
     def start(self) -> str:
         """Send the burst: whole when it is finite and fits in ``stream.max_points`` knots, else start
-        streaming it. Returns a one-line description."""
+        streaming it; with ``command_interface`` action, as one FollowJointTrajectory goal. Returns a one-line
+        description; raises ValueError (nothing sent) for a streamed burst with the action."""
+        knots = self._whole_burst_knots()
+        if self.goals is not None:
+            return self._send_goal(knots)
         self._stream = None
         self.bursts += 1
-        knots = self._whole_burst_knots()
         if knots is not None:
             times, pos, vel, acc = knots
             n = pos.shape[1]
@@ -133,6 +141,22 @@ class Actuator(Node):
             return 'burst streamed from the first sim time seen on actuator/joint_states'
         self._start_stream(self.sim_time)
         return f'burst streamed from t = {self._stream.origin_ns * 1e-9:.9f} s (sim time)'
+
+    def _send_goal(self, knots: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None) -> str:
+        """The burst as one FollowJointTrajectory goal, stamped 0 (start when the simulator handles it)."""
+        if knots is None:
+            raise ValueError('command_interface action sends whole bursts only, and this one is streamed '
+                             '(stroke.count 0, or more knots than stream.max_points): send it on the topic '
+                             '(command_interface topic) or raise stream.max_points')
+        if not self.goals.ready():
+            raise ValueError("the simulator's follow_joint_trajectory action server is not reached: nothing sent")
+        self.bursts += 1
+        times, pos, vel, acc = knots
+        n = pos.shape[1]
+        goal = messages.trajectory(joint_names(n), times, pos, vel, acc, Time())
+        goal.header.frame_id = self._command_id()
+        self.goals.send(goal)
+        return f'burst sent as a FollowJointTrajectory goal: {times.size} knots on {n} joints, {times[-1]:.6g} s'
 
     def _whole_burst_knots(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None:
         """The configured burst's knots (:func:`sample_waveform`) when it is finite and fits in one message;
@@ -200,7 +224,13 @@ class Actuator(Node):
         return self._pub.get_subscription_count()
 
     def stop(self) -> str:
-        """End any stream and publish an empty trajectory (stop: hold the strokes where they are)."""
+        """End any stream and publish an empty trajectory (stop: hold the strokes where they are); with the
+        action, cancel the running goal (the simulator holds the strokes where they are)."""
+        if self.goals is not None:
+            if not self.goals.cancel():
+                return f'no goal running: nothing to stop (the last one {self.goals.state})'
+            self.stops += 1
+            return 'cancel sent'
         self._stream = None
         self._pending_stream = False
         n = len(self.get_parameter('stroke.phases').value)
@@ -271,22 +301,30 @@ class Actuator(Node):
     def _auto_start(self) -> None:
         """Send the burst once, when the simulator is there (:meth:`simulator_ready`). The timer is gone after
         the first start: a tick the executor had already queued finds ``_auto`` None and does nothing."""
-        if self._auto is None or not self.simulator_ready():
+        ready = self.goals.ready() if self.goals is not None else self.simulator_ready()
+        if self._auto is None or not ready:
             return
         self.destroy_timer(self._auto)
         self._auto = None
-        self.get_logger().info(self.start())
+        try:
+            self.get_logger().info(self.start())
+        except ValueError as err:
+            self.get_logger().error(f'auto_start: nothing sent: {err}')
 
     def destroy_node(self) -> None:
         """Wait (up to :data:`ACK_TIMEOUT_S`) until every subscriber acknowledged what was sent, then destroy:
         a reliable message not yet delivered to a slower subscriber (a recorder) dies with its publisher."""
         self._pub.wait_for_all_acked(Duration(nanoseconds=round(ACK_TIMEOUT_S * 1e9)))
+        if self.goals is not None:
+            self.goals.destroy()
         super().destroy_node()
 
     def state(self) -> str:
         """What the node is doing, in words: for /diagnostics and people."""
         if self._auto is not None:
             return 'waiting for the simulator (auto_start)'
+        if self.goals is not None:
+            return f'goal {self.goals.state}' if self.goals.sent else 'idle'
         if self._pending_stream:
             return 'streaming: waiting for sim time on actuator/joint_states'
         if self._stream is not None and not self._simulator_subscriptions():
@@ -296,7 +334,10 @@ class Actuator(Node):
         return 'idle'
 
     def _on_start(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        response.success, response.message = True, self.start()
+        try:
+            response.success, response.message = True, self.start()
+        except ValueError as err:
+            response.success, response.message = False, str(err)
         return response
 
     def _on_stop(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
@@ -317,8 +358,13 @@ class Actuator(Node):
                  'windows_sent': self.windows, 'stream_underruns': self.underruns, 'stream_rephases': self.rephases,
                  'streaming': self._stream is not None, 'subscribers': self._pub.get_subscription_count(),
                  'commands_refused': self.refusals.refused, 'last_refusal': self.refusals.last}
+        if self.goals is not None:       # the goals' answers: refusals and failures come back in their results
+            items.update({'goals_sent': self.goals.sent, 'goals_succeeded': self.goals.succeeded,
+                          'goals_canceled': self.goals.canceled, 'commands_refused': self.goals.refused,
+                          'last_refusal': self.goals.last})
+        troubled = self.rephases or items['commands_refused']
         status = DiagnosticStatus(name=f'{self.get_name()}: stroke', hardware_id='micro_feeder',
-                                  level=DiagnosticStatus.WARN if self.rephases else DiagnosticStatus.OK,
+                                  level=DiagnosticStatus.WARN if troubled else DiagnosticStatus.OK,
                                   message=items['state'],
                                   values=[KeyValue(key=k, value=str(v)) for k, v in items.items()])
         self._pub_diag.publish(DiagnosticArray(header=Header(stamp=self.get_clock().now().to_msg()),

@@ -41,6 +41,7 @@ from ..physics.waveforms import StrokeParams
 from ..settings import model_specs
 from ..sim.stream import sample_waveform
 from ._ros import RefusalWatch, status_name, topic_qos
+from .goal_sender import COMMAND_INTERFACES, GoalSender
 from .parameters import declare, values
 from .spin import spin_node
 
@@ -56,6 +57,10 @@ NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
                                'backlog of state messages and sampling a long burst (up to ~20 ms measured '
                                'with the simulator in the same process); a late burst starts mid-stroke',
                                's', ge=0, le=1.0, read_only=True), 0.05),
+    'command_interface': (ParamSpec('how bursts are sent: "topic" (actuator/trajectory) or "action" (each burst '
+                                    'one FollowJointTrajectory goal; in lockstep the controller grants the next '
+                                    'step once the simulator has handled the goal)', kind='str',
+                                    choices=COMMAND_INTERFACES, read_only=True), 'topic'),
 }
 START_POLL_PERIOD = 0.05   # s (wall clock): how often a lockstep controller looks for the step service
 STATUS_QOS = QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
@@ -87,6 +92,8 @@ class FeedController(Node):
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', topic_qos('/diagnostics'))
         self._instance = f'{self.get_fully_qualified_name()}@{time.time_ns():x}'   # names this run's bursts
         self.refusals = RefusalWatch(self, self._instance + ':')    # the simulator's answers to them
+        self.goals = (GoalSender(self, on_handled=lambda _started: self._grant_step())   # a goal is not a grant
+                      if self.get_parameter('command_interface').value == 'action' else None)
         self.create_subscription(PoseStamped, 'particle/pose', self._on_pose, topic_qos('particle/pose'))
         self.create_subscription(TwistStamped, 'particle/twist', self._on_twist, topic_qos('particle/twist'))
         self._step_client = self.create_client(Trigger, 'simulator/step') if self._lockstep else None
@@ -163,12 +170,12 @@ class FeedController(Node):
         """Real-time mode: has ``actuator/trajectory`` a subscriber yet? A burst sent before it has one is
         lost (or, on a half-made match, delivered late and joined mid-stroke); the state keeps coming, so
         the controller decides again on the next one. Said once in the log while waiting."""
-        if self._pub_trajectory.get_subscription_count() > 0:
+        if (self.goals.ready() if self.goals is not None else self._pub_trajectory.get_subscription_count() > 0):
             return True
         if not self._told_waiting:
             self._told_waiting = True
-            self.get_logger().info('waiting for a subscriber on actuator/trajectory (the simulator) before '
-                                   'the first burst')
+            self.get_logger().info('waiting for the simulator (a subscriber on actuator/trajectory, or its '
+                                   'follow_joint_trajectory action) before the first burst')
         return False
 
     def _fire(self, burst: Burst, t: float, x: float) -> None:
@@ -189,8 +196,12 @@ class FeedController(Node):
         self.send(msg)
 
     def send(self, msg: JointTrajectory) -> None:
-        """Publish a command (in lockstep it also grants the simulator its next step)."""
-        self._pub_trajectory.publish(msg)
+        """Publish a command (in lockstep it also grants the simulator its next step), or send it as a goal
+        (the grant follows once the simulator has handled it)."""
+        if self.goals is not None:
+            self.goals.send(msg)
+        else:
+            self._pub_trajectory.publish(msg)
         self.commands_sent += 1
 
     def _grant_step(self) -> None:
@@ -198,8 +209,9 @@ class FeedController(Node):
             self._step_client.call_async(Trigger.Request())
 
     def _grant_first_step(self) -> None:
-        """Lockstep start: one grant as soon as the simulator's step service is there."""
-        if self._step_client.service_is_ready():
+        """Lockstep start: one grant as soon as the simulator's step service is there (and its action server,
+        with the action: a goal sent before it is matched would be lost, and with it the grant)."""
+        if self._step_client.service_is_ready() and (self.goals is None or self.goals.ready()):
             self.destroy_timer(self._first_grant)
             self._grant_step()
 
@@ -224,9 +236,17 @@ class FeedController(Node):
     def status_text(self) -> str:
         """One line: the outcome, then the simulator's refusals of this controller's bursts, if any."""
         text = self._outcome_text()
-        if self.refusals.refused:
-            text += f' ({self.refusals.refused} burst(s) refused by the simulator, the last {self.refusals.last})'
+        refused, last = self._refused()
+        if refused:
+            text += f' ({refused} burst(s) refused by the simulator, the last {last})'
         return text
+
+    def _refused(self) -> tuple[int, str]:
+        """(bursts the simulator refused, the last one and why): from simulator/command_status on the topic,
+        from the goals' results with the action."""
+        if self.goals is not None:
+            return self.goals.refused, self.goals.last
+        return self.refusals.refused, self.refusals.last
 
     def _outcome_text(self) -> str:
         r = self.result()
@@ -243,8 +263,8 @@ class FeedController(Node):
         status = DiagnosticStatus(name=status_name(self, 'feed'), hardware_id='micro_feeder', level=level,
                                   message=self.status_text(),
                                   values=[KeyValue(key=k, value=str(v)) for k, v in
-                                          {**self.result(), 'commands_refused': self.refusals.refused,
-                                           'last_refusal': self.refusals.last}.items()])
+                                          {**self.result(), 'commands_refused': self._refused()[0],
+                                           'last_refusal': self._refused()[1]}.items()])
         self._pub_diag.publish(DiagnosticArray(header=Header(stamp=stamps.to_time(self.last_t)),
                                                status=[status]))
 
