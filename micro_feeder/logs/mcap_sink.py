@@ -21,6 +21,7 @@ import os
 import struct
 import zlib
 from collections import defaultdict
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -41,23 +42,65 @@ from mcap.records import (
 MAGIC = b'\x89MCAP0\r\n'
 HEAD = 9              # opcode (1 byte) + record length (8 bytes)
 COPY_PIECE = 1 << 20  # bytes copied at a time when restoring a deleted file
+COUNT = struct.Struct('<HI')  # a chunk's messages on one channel: channel id, count
+CRC = struct.Struct('<I')
+INDEX_HEAD = struct.Struct('<QQQ')  # a ChunkIndex record's first fields: message start and end time, chunk offset
+
+
+class _Chunk:
+    """A whole chunk as a summary needs it, in ~0.4 kB whatever the log's length (a chunk goes out every
+    second, for hours): its ChunkIndex record serialized, and what cutting the file back to its start needs
+    (the data CRC there and its messages per channel), packed."""
+
+    __slots__ = ('cut', 'index_record')
+
+    def __init__(self, index: ChunkIndex, crc_before: int, counts: dict[int, int]):
+        builder = RecordBuilder()
+        index.write(builder)
+        self.index_record = builder.end()
+        self.cut = CRC.pack(crc_before) + b''.join(COUNT.pack(channel, n) for channel, n in counts.items())
+
+    @property
+    def start_time(self) -> int:
+        return INDEX_HEAD.unpack_from(self.index_record, HEAD)[0]
+
+    @property
+    def end_time(self) -> int:
+        return INDEX_HEAD.unpack_from(self.index_record, HEAD)[1]
+
+    @property
+    def start_offset(self) -> int:
+        return INDEX_HEAD.unpack_from(self.index_record, HEAD)[2]
+
+    @property
+    def crc_before(self) -> int:
+        return CRC.unpack_from(self.cut)[0]
+
+    def channel_counts(self) -> Iterator[tuple[int, int]]:
+        return COUNT.iter_unpack(self.cut[CRC.size:])
 
 
 @dataclass
 class _State:
-    """What a summary needs of the file up to one position; per chunk, the messages per channel and the
-    data CRC where it starts (so that the file can also be cut back to the start of its last chunk)."""
+    """What a summary needs of the file up to one position: the whole chunks (:class:`_Chunk`), the messages
+    per channel, the data CRC; and the chunk being written (its index filled in as its message indexes go by,
+    its messages per channel, the data CRC where it starts)."""
 
     position: int = 0
     crc: int = 0
-    chunks: list[ChunkIndex] = field(default_factory=list)
+    chunks: list[_Chunk] = field(default_factory=list)
     counts: dict[int, int] = field(default_factory=lambda: defaultdict(int))
-    chunk_counts: list[dict[int, int]] = field(default_factory=list)
-    chunk_crcs: list[int] = field(default_factory=list)
+    open: tuple[ChunkIndex, dict[int, int], int] | None = None
+
+    def seal(self) -> None:
+        """The chunk being written is whole: keep it compact."""
+        if self.open is not None:
+            index, counts, crc_before = self.open
+            self.chunks.append(_Chunk(index, crc_before, counts))
+            self.open = None
 
     def copy(self) -> _State:
-        return _State(self.position, self.crc, list(self.chunks), defaultdict(int, self.counts),
-                      list(self.chunk_counts), list(self.chunk_crcs))
+        return _State(self.position, self.crc, list(self.chunks), defaultdict(int, self.counts), None)
 
 
 class McapSink:
@@ -127,7 +170,7 @@ class McapSink:
         chunks = self._safe.chunks
         if not chunks:
             return None
-        return min(c.message_start_time for c in chunks), max(c.message_end_time for c in chunks)
+        return min(c.start_time for c in chunks), max(c.end_time for c in chunks)
 
     # -- faults --------------------------------------------------------------------------------------
     def deleted(self) -> bool:
@@ -173,8 +216,8 @@ class McapSink:
         if not safe.chunks:
             return False
         chunk = safe.chunks.pop()
-        safe.position, safe.crc = chunk.chunk_start_offset, safe.chunk_crcs.pop()
-        for channel, n in safe.chunk_counts.pop().items():
+        safe.position, safe.crc = chunk.start_offset, chunk.crc_before
+        for channel, n in chunk.channel_counts():
             safe.counts[channel] -= n
         return True
 
@@ -221,11 +264,14 @@ class McapSink:
         def group(opcode: int, items: list) -> None:
             start = summary.count
             for item in items:
-                item.write(summary)
+                if isinstance(item, _Chunk):
+                    summary.write(item.index_record)
+                else:
+                    item.write(summary)
             offsets.append(SummaryOffset(group_opcode=opcode, group_start=summary_start + start,
                                          group_length=summary.count - start))
 
-        span = [(c.message_start_time, c.message_end_time) for c in safe.chunks]
+        span = [(c.start_time, c.end_time) for c in safe.chunks]
         statistics = Statistics(
             message_count=sum(safe.counts.values()), schema_count=len(self.schemas),
             channel_count=len(self.channels), attachment_count=0, metadata_count=len(metadata),
@@ -270,20 +316,20 @@ class McapSink:
                 (name_length,) = struct.unpack_from('<I', view, body + 28)
                 compression = bytes(view[body + 32:body + 32 + name_length]).decode()
                 (records_length,) = struct.unpack_from('<Q', view, body + 32 + name_length)
-                now.chunks.append(ChunkIndex(
+                now.seal()
+                now.open = (ChunkIndex(
                     message_start_time=start, message_end_time=end, chunk_start_offset=base + pos,
                     chunk_length=HEAD + length, message_index_offsets={}, message_index_length=0,
-                    compression=compression, compressed_size=records_length, uncompressed_size=size))
-                now.chunk_counts.append({})
-                now.chunk_crcs.append(zlib.crc32(view[:pos], now.crc))
+                    compression=compression, compressed_size=records_length, uncompressed_size=size),
+                    {}, zlib.crc32(view[:pos], now.crc))
                 open_chunk = True
-            elif op == Opcode.MESSAGE_INDEX and now.chunks:
+            elif op == Opcode.MESSAGE_INDEX and now.open is not None:
                 channel_id, records_length = struct.unpack_from('<HI', view, body)
-                chunk = now.chunks[-1]
+                chunk, counts, _ = now.open
                 chunk.message_index_offsets[channel_id] = base + pos
                 chunk.message_index_length += HEAD + length
                 now.counts[channel_id] += records_length // 16
-                now.chunk_counts[-1][channel_id] = records_length // 16
+                counts[channel_id] = records_length // 16
                 open_chunk = False
             elif op == Opcode.DATA_END:   # the writer is finishing: the data section ends here
                 self._ended = True
@@ -293,4 +339,5 @@ class McapSink:
         now.crc = zlib.crc32(view, now.crc)
         now.position += len(view)
         if not open_chunk:
+            now.seal()
             self._safe = now.copy()

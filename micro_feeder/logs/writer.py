@@ -22,6 +22,7 @@ import contextlib
 import errno
 import os
 import time
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -43,6 +44,7 @@ CHECK_PERIOD = 0.25      # s: at most this often, check that the log file is sti
 RESERVE_FILE = '.reserve'
 RESERVE_BYTES = 1 << 20  # room freed on a full disk to finish the log (its summary grows ~250 B per chunk)
 MAX_CHUNKS_DROPPED = 3   # whole chunks a file at its size limit may lose to make room for its summary
+STAMPS_KEPT = 8 * (MAX_CHUNKS_DROPPED + 1)   # (chunks, last stamp) pairs kept: a fault cuts back that far at most
 
 # Keys of the recorder metadata record (and metadata.yaml custom_data) of a log whose recording stopped early.
 STOPPED_EARLY = 'stopped_early'          # 'true'
@@ -155,7 +157,8 @@ class LogWriter:
         self._last_flush = self._last_check = time.monotonic()
         self._since_size_check = 0
         self._pending_stamp: int | None = None  # the last stamp_topic stamp written
-        self._stamps: list[tuple[int, int]] = []  # (whole chunks of the current file, last stamp in them)
+        # (whole chunks of the current file, last stamp in them): the recent ones, all a fault can cut back to
+        self._stamps: deque[tuple[int, int]] = deque(maxlen=STAMPS_KEPT)
         self._file_start_stamp: int | None = None   # the last stamp in the files before the current one
         self._safe_chunks = 0
         self._reserve = None if self.bare or not stop_on_error else self.path / RESERVE_FILE
@@ -328,7 +331,10 @@ class LogWriter:
         self.flush_if_due()
 
     def _kept(self) -> None:
-        """Everything written so far is in whole chunks on disk (after a flush, or a chunk that filled)."""
+        """Everything written so far is in whole chunks on disk (after a flush, or a chunk that filled). The
+        sink keeps what the summary needs of them; mcap's Writer's list of chunk indexes, which only its
+        finish() reads (never called: :meth:`_finish_file`), is emptied so that it does not grow for hours."""
+        getattr(self._writer, '_Writer__chunk_indices', []).clear()
         self._safe_chunks = self._sink.safe_chunks
         if self._pending_stamp is not None and (not self._stamps or self._stamps[-1][1] != self._pending_stamp):
             self._stamps.append((self._safe_chunks, self._pending_stamp))
@@ -349,7 +355,7 @@ class LogWriter:
         self._schemas = {}
         self._safe_chunks = 0
         self._file_start_stamp = self._pending_stamp
-        self._stamps = []
+        self._stamps = deque(maxlen=STAMPS_KEPT)
         for entry in self._topics.values():
             entry.channel_id = -1
             entry.in_file = 0
@@ -364,11 +370,12 @@ class LogWriter:
         return data
 
     def _finish_file(self) -> None:
+        """Close the last chunk and end the file with the sink's summary (the one a failed file gets too:
+        mcap's Writer's own would need every chunk's index kept as objects, ~2 kB a chunk)."""
         data = self._custom()
-        if data:
-            self._writer.add_metadata(RECORDER_METADATA, data)
-        self._writer.finish()
+        self._writer.flush()
         self._kept()
+        self._sink.finish_at_safe_point({RECORDER_METADATA: data} if data else {})
         self._sink.close()
         self._writer = None
 
