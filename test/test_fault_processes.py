@@ -199,8 +199,13 @@ def test_a_stream_follows_sim_time_through_a_reset_and_a_stalled_actuator(ros_co
             watcher.strokes.clear()
             resumed_at = 0.0
         else:
+            stopped_at = watcher.strokes[-1][0]
             actuator.send_signal(signal.SIGSTOP)
             _spin(executor, 2.0)
+            # a stall the stream must notice is one that outlasts the strokes scheduled ahead in sim time: on a
+            # starved machine 2 s of wall time once gave less than stream.lead of sim time (no re-phase needed)
+            wait_until(lambda: watcher.strokes[-1][0] - stopped_at > 2 * LEAD, 30, executor=executor,
+                       what='sim time passing the strokes scheduled before the stop')
             resumed_at = watcher.strokes[-1][0]
             actuator.send_signal(signal.SIGCONT)
         wait_until(lambda: _moving_again_after(watcher, resumed_at) is not None, 30, executor=executor,
