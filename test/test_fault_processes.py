@@ -151,17 +151,20 @@ def _moving_again_after(watcher: Watcher, t_from: float) -> float | None:
     return None
 
 
-def _assert_nothing_late_joined_nothing_twice(sim_status: dict[str, str]) -> None:
+def _assert_nothing_late_joined_nothing_twice(sim_status: dict[str, str], lost: int = 0) -> None:
     """Every refusal was of a late window or of a window continuing a refused one (none was a duplicate or
     invalid), and none joined: a window can reach the simulator late when a process is starved or stopped
     for longer than stream.lead (windows in flight when the actuator stopped are repaired by its reliable
     writer only when it runs again; a loaded CI machine starved the simulator ~0.2 s once), and the simulator
     must refuse it rather than jump, and refuse the windows continuing it. The actuator re-phases on the
     first refusal, so each late window costs at most the windows it had in flight (a loop of refusals cost
-    137 windows against 2 late ones once)."""
+    137 windows against 2 late ones once). ``lost``: windows that may never reach the simulator (the first
+    ones a new simulator's subscription gets before it has matched the actuator's writer), each of which
+    costs the same as a late one: the windows continuing it are refused until the actuator re-phases."""
     rejected, late = int(sim_status['rejected_commands']), int(sim_status['commands_late'])
-    assert rejected <= late * (1 + IN_FLIGHT), sim_status
-    assert rejected == 0 or any(why in sim_status['last_rejection'] for why in ('late by', 'continues')), sim_status
+    said = f"{rejected} refused, {late} late; the last refusal: {sim_status['last_rejection']}"
+    assert rejected <= (late + lost) * (1 + IN_FLIGHT), said
+    assert rejected == 0 or any(why in sim_status['last_rejection'] for why in ('late by', 'continues')), said
 
 
 def _strokes_speed_bound(seconds_: float = 3.0) -> float:
@@ -253,4 +256,7 @@ def test_a_stream_survives_a_simulator_restart(ros_context: Context) -> None:
         watcher.destroy_node()
         stop_process(actuator)
         stop_process(sim)
-    _assert_nothing_late_joined_nothing_twice(sim_status)
+    # the actuator's writer matches the new simulator's reader before the reader matches it: a window sent in
+    # between is lost (CI once: 10 refused, 0 late, each a window continuing the lost one), and the stream
+    # re-phases on the first refusal
+    _assert_nothing_late_joined_nothing_twice(sim_status, lost=1)

@@ -66,8 +66,10 @@ class GoalSender:
             self.state = STATUS_NAMES.get(status, f'status {status}')
             if status == GoalStatus.STATUS_SUCCEEDED and result.error_code == result.SUCCESSFUL:
                 self.succeeded += 1
+                self._node.get_logger().info(f'goal {name} succeeded', throttle_duration_sec=1.0)
             elif status == GoalStatus.STATUS_CANCELED:
                 self.canceled += 1
+                self._node.get_logger().info(f'goal {name} canceled: {result.error_string}')
             else:
                 self.refused += 1
                 self.last = f'{name}: {self.state}: {result.error_string or f"error code {result.error_code}"}'
