@@ -85,13 +85,18 @@ def start_process(name: str, *ros_args: str) -> subprocess.Popen:
 
 
 def stop_process(proc: subprocess.Popen) -> tuple[int, str]:
-    """SIGINT and wait (SIGKILL after 20 s): (exit status, -9 when killed; output)."""
+    """SIGINT and wait (SIGKILL after 20 s): (exit status, -9 when killed; output). Stopping it again gives
+    the same answer (its output is read once)."""
+    stopped = getattr(proc, 'stopped', None)
+    if stopped is not None:
+        return stopped
     if proc.poll() is None:
         proc.send_signal(signal.SIGINT)
     try:
         out, _ = proc.communicate(timeout=20)
+        proc.stopped = (proc.returncode, out)
     except subprocess.TimeoutExpired:
         proc.kill()
         out, _ = proc.communicate()
-        return -9, out
-    return proc.returncode, out
+        proc.stopped = (-9, out)
+    return proc.stopped

@@ -90,9 +90,14 @@ def test_fifty_separate_actuator_starts_are_each_applied_and_logged_once(ros_con
     executor.add_node(watcher)
     actuators = []
     try:
-        wait_until(lambda: all(watcher.count_publishers(topic) > 0 and watcher.count_subscribers(topic) >= 1
-                               for topic in ('particle/pose', 'simulator/trajectories_received')),
-                   120, executor=executor, what='simulator and recorder')
+        ready = lambda: {topic: (watcher.count_publishers(topic), watcher.count_subscribers(topic))  # noqa: E731
+                         for topic in ('particle/pose', 'simulator/trajectories_received')}
+        try:
+            wait_until(lambda: all(p > 0 and s >= 1 for p, s in ready().values()), 120, executor=executor,
+                       what='simulator and recorder')
+        except AssertionError as err:   # say what was missing and what the processes said (CI, once)
+            raise AssertionError(f'{err}: (publishers, subscribers) {ready()}; simulator: {stop_process(sim)}; '
+                                 f'recorder: {stop_process(recorder)}') from err
         for first in range(0, STARTS, AT_ONCE):
             batch = [start_process('actuator', '-r', f'__node:=actuator_{k}', '-p', 'stroke.count:=1')
                      for k in range(first, first + AT_ONCE)]
