@@ -92,7 +92,7 @@ class FeedController(Node):
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', topic_qos('/diagnostics'))
         self._instance = f'{self.get_fully_qualified_name()}@{time.time_ns():x}'   # names this run's bursts
         self.refusals = RefusalWatch(self, self._instance + ':')    # the simulator's answers to them
-        self.goals = (GoalSender(self, on_handled=lambda _started: self._grant_step())   # a goal is not a grant
+        self.goals = (GoalSender(self, on_handled=self._grant_step)   # a goal is not a grant
                       if self.get_parameter('command_interface').value == 'action' else None)
         self.create_subscription(PoseStamped, 'particle/pose', self._on_pose, topic_qos('particle/pose'))
         self.create_subscription(TwistStamped, 'particle/twist', self._on_twist, topic_qos('particle/twist'))
@@ -260,11 +260,12 @@ class FeedController(Node):
     def _publish_diagnostics(self) -> None:
         level = {'reached': DiagnosticStatus.OK, 'running': DiagnosticStatus.OK}.get(self.planner.status,
                                                                                     DiagnosticStatus.ERROR)
+        refused, last = self._refused()
         status = DiagnosticStatus(name=status_name(self, 'feed'), hardware_id='micro_feeder', level=level,
                                   message=self.status_text(),
                                   values=[KeyValue(key=k, value=str(v)) for k, v in
-                                          {**self.result(), 'commands_refused': self._refused()[0],
-                                           'last_refusal': self._refused()[1]}.items()])
+                                          {**self.result(), 'commands_refused': refused,
+                                           'last_refusal': last}.items()])
         self._pub_diag.publish(DiagnosticArray(header=Header(stamp=stamps.to_time(self.last_t)),
                                                status=[status]))
 

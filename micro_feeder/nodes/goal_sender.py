@@ -26,13 +26,13 @@ STATUS_NAMES = {GoalStatus.STATUS_SUCCEEDED: 'succeeded', GoalStatus.STATUS_ABOR
 class GoalSender:
     """One node's FollowJointTrajectory goals: sent, running, and how each ended.
 
-    ``on_handled(started)`` runs once per goal when the simulator has handled it: ``True`` at its first
-    feedback (the trajectory is applied), ``False`` when it ended without one (refused). A lockstep sender
-    grants its next step then, since a goal is not a grant. Counters: ``sent``, ``succeeded``, ``refused``
-    (ended other than succeeded or canceled: refused at once, aborted while running, replaced), ``canceled``;
-    ``last`` = the last failure (identity: error string), as :class:`~._ros.RefusalWatch` keeps it."""
+    ``on_handled()`` runs once per goal when the simulator has handled it: at its first feedback (the
+    trajectory is applied) or when it ended without one (refused). A lockstep sender grants its next step
+    then, since a goal is not a grant. Counters: ``sent``, ``succeeded``, ``refused`` (ended other than
+    succeeded or canceled: refused at once, aborted while running, replaced), ``canceled``; ``last`` = the
+    last failure (identity: error string), as :class:`~._ros.RefusalWatch` keeps it."""
 
-    def __init__(self, node: Node, on_handled: Callable[[bool], None] | None = None):
+    def __init__(self, node: Node, on_handled: Callable[[], None] | None = None):
         self._node = node
         self._on_handled = on_handled
         self._client = ActionClient(node, FollowJointTrajectory, ACTION)
@@ -52,12 +52,16 @@ class GoalSender:
         handled = [False]
         name = trajectory.header.frame_id or f'goal {self.sent}'
 
-        def on_feedback(_feedback: Any) -> None:
+        def handled_once() -> None:
             if not handled[0]:
                 handled[0] = True
-                self.state = 'running'
                 if self._on_handled is not None:
-                    self._on_handled(True)
+                    self._on_handled()
+
+        def on_feedback(_feedback: Any) -> None:
+            if not handled[0]:
+                self.state = 'running'
+            handled_once()
 
         def on_result(future: Any) -> None:
             response = future.result()
@@ -71,29 +75,27 @@ class GoalSender:
                 self.canceled += 1
                 self._node.get_logger().info(f'goal {name} canceled: {result.error_string}')
             else:
-                self.refused += 1
-                self.last = f'{name}: {self.state}: {result.error_string or f"error code {result.error_code}"}'
-                self._node.get_logger().warning(f'the simulator ended goal {self.last}', throttle_duration_sec=5.0)
-            if not handled[0]:
-                handled[0] = True
-                if self._on_handled is not None:
-                    self._on_handled(False)
+                self._failed(f'{name}: {self.state}: {result.error_string or f"error code {result.error_code}"}')
+            handled_once()
 
         def on_goal(future: Any) -> None:
             handle = future.result()
             if not handle.accepted:
-                self.refused += 1
                 self.state = 'rejected'
-                self.last = f'{name}: rejected'
-                self._node.get_logger().warning(f'the simulator rejected goal {name}', throttle_duration_sec=5.0)
-                if self._on_handled is not None:
-                    self._on_handled(False)
+                self._failed(f'{name}: rejected')
+                handled_once()
                 return
             self.running = handle
             handle.get_result_async().add_done_callback(on_result)
 
         self._client.send_goal_async(FollowJointTrajectory.Goal(trajectory=trajectory),
                                      feedback_callback=on_feedback).add_done_callback(on_goal)
+
+    def _failed(self, what: str) -> None:
+        """A goal refused, aborted or replaced: counted, kept as the last failure, logged (throttled)."""
+        self.refused += 1
+        self.last = what
+        self._node.get_logger().warning(f'the simulator ended goal {what}', throttle_duration_sec=5.0)
 
     def cancel(self) -> bool:
         """Cancel the running goal (the simulator then holds the strokes where they are); False when none runs."""

@@ -681,15 +681,15 @@ class Simulator(Node):
             self.commands.received += 1
             self._pub_received['actuator/trajectory'].publish(copy)
             t = self._stepper.t
-            try:
-                if isinstance(parsed, ValueError):
-                    raise parsed
-                start = self._stepper.command_trajectory(parsed)
-            except ValueError as err:
-                self._refuse(str(err))
-                refusal = err
+            refusal = parsed if isinstance(parsed, ValueError) else None
+            if refusal is None:
+                try:
+                    start = self._stepper.command_trajectory(parsed)
+                except ValueError as err:
+                    refusal = err
+            if refusal is not None:
+                self._refuse(str(refusal))
             else:
-                refusal = None
                 self._stream_open = False
                 self.command_serial += 1
                 serial = self.command_serial
