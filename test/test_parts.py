@@ -24,10 +24,13 @@ from hypothesis import strategies as st
 
 from micro_feeder.cli import main
 from micro_feeder.physics.dynamics import FeederModel
+from micro_feeder.physics.dynamics.layout import FS_MAX_SPEED
+from micro_feeder.physics.dynamics.model import _WORK
 from micro_feeder.physics.parameters import ParameterError
 from micro_feeder.physics.particle import ParticleParams
 from micro_feeder.physics.parts import PartsModel
 from micro_feeder.physics.parts.figures import gate_crossings, gate_figures, spacing_figures
+from micro_feeder.physics.waveforms import StrokeSchedule
 from micro_feeder.settings import load_settings
 
 G = 9.81
@@ -170,6 +173,49 @@ def test_a_crowded_travelling_wave_keeps_parts_apart_in_order():
 
 
 EXAMPLES = int(os.environ.get('MF_PARTS_EXAMPLES', '25'))
+
+
+@settings(max_examples=EXAMPLES, derandomize=True, deadline=None, database=None,
+          suppress_health_check=[HealthCheck.too_slow])
+@given(starts=st.lists(st.tuples(st.floats(0.2e-3, 2.0e-3), st.floats(-0.05, 0.05), st.booleans()),
+                       min_size=1, max_size=6),
+       ends=st.lists(st.floats(1e-4, 4e-3), min_size=1, max_size=3), hold_at=st.floats(0.0, 6e-3),
+       small_buffer=st.booleans())
+def test_advancing_copies_together_is_advancing_each_alone(starts, ends, hold_at, small_buffer):
+    """FeederModel.advance_copies (one compiled call for all parts) gives every part the very state, events and
+    peak speed a part advanced alone gets, over stroke segments (a hold commanded mid-run), in flight, sliding
+    or stuck, also when the shared event buffer overflows and a part goes on alone; the originals stay."""
+    flat = load_settings(['config/feeder.yaml', 'config/travelling_wave.yaml'], ['stroke.count=20'])
+    model = FeederModel.from_settings(flat)
+    schedule = StrokeSchedule(model.waveform())
+    schedule.hold_from(hold_at)
+    states = [model.flying_state(x0, 2e-6, v0, 0.01) if flying else model.initial_state(x0, v0)
+              for x0, v0, flying in starts]
+    work = _WORK.arrays(states[0].y.size, model.n_actuators)
+    if small_buffer:
+        work.batch_ev_i, work.batch_ev_f = np.zeros((3, 3), dtype=np.int64), np.zeros((3, 2))
+    try:
+        for t_end in np.cumsum(ends):
+            before = [s.copy() for s in states]
+            advanced = model.advance_copies(states, float(t_end), schedule)
+            for state, old in zip(states, before, strict=True):
+                assert np.array_equal(state.y, old.y) and np.array_equal(state.fs, old.fs, equal_nan=True)
+            for k, state in enumerate(states):
+                alone = state.copy()
+                run_max = alone.max_speed
+                alone.fs[FS_MAX_SPEED] = abs(alone.xdot)
+                events = model.advance(alone, float(t_end), schedule)
+                peak = alone.max_speed
+                alone.fs[FS_MAX_SPEED] = max(run_max, peak)
+                together = advanced.states[k]
+                assert np.array_equal(alone.y, together.y) and np.array_equal(alone.iv, together.iv)
+                assert np.array_equal(alone.fs, together.fs, equal_nan=True)
+                assert list(advanced.events[k]) == list(events) and advanced.peak_speed[k] == peak
+                path = np.abs(np.diff([state.x, *events.x, alone.x])).sum()
+                assert advanced.path[k] == pytest.approx(path, rel=1e-12, abs=1e-18)
+            states = advanced.states
+    finally:
+        work.batch_ev_i, work.batch_ev_f = np.zeros((4096, 3), dtype=np.int64), np.zeros((4096, 2))
 
 
 @st.composite

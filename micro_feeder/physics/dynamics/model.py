@@ -21,9 +21,9 @@ from __future__ import annotations
 
 import math
 import threading
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -398,18 +398,61 @@ class FeederModel:
         events, _ = self._integrate(state, t_target, source, record=False)
         return events
 
-    def advance_with_peak_speed(self, state: FeederState, t_target: float,
-                                source: StrokeTable | StrokeSchedule | None = None) -> tuple[EventList, float]:
-        """:meth:`advance`, and the largest |ẋ| (m/s; |v_x| in flight) at the state's start, its step ends and its
-        events on the way: how far the part may have gone in between (docs/parts.md). ``state.max_speed``
-        keeps the run's largest as before."""
-        run_max = state.fs[layout.FS_MAX_SPEED]
-        state.fs[layout.FS_MAX_SPEED] = abs(state.y[1])
-        try:
-            events = self.advance(state, t_target, source)
-            return events, float(state.fs[layout.FS_MAX_SPEED])
-        finally:
-            state.fs[layout.FS_MAX_SPEED] = max(run_max, state.fs[layout.FS_MAX_SPEED])
+    def advance_copies(self, states: Sequence[FeederState], t_target: float,
+                       source: StrokeTable | StrokeSchedule | None = None) -> PartsAdvance:
+        """Copies of ``states`` (all at one sim time) each integrated to ``t_target`` (s) as :meth:`advance`
+        would (the same steps, bit for bit), in one compiled call per stroke segment instead of one Python call
+        per state; ``states`` are left as they were. Also returns, per state, the largest |ẋ| (m/s; |v_x| in
+        flight) at its start, its step ends and its events, and the distance along x between its start, its
+        events and its end (m): how far it may have gone in between (docs/parts.md). Each copy's
+        ``max_speed`` keeps its run's largest as before."""
+        n = len(states)
+        ys = np.stack([s.y for s in states])
+        if ys.shape[1] != 4 + 2 * self._n_stacks:
+            self._check_state(states[0])
+        ivs = np.stack([s.iv for s in states])
+        fss = np.stack([s.fs for s in states])
+        aheads = np.stack([s.ahead for s in states])
+        run_max = fss[:, layout.FS_MAX_SPEED].copy()
+        fss[:, layout.FS_MAX_SPEED] = np.abs(ys[:, 1])
+        running = np.ones(n, dtype=np.bool_)
+        status = np.zeros(n, dtype=np.int64)
+        path = np.zeros(n)
+        ons = [s.ahead_on for s in states]
+        collected: list[list[EventList]] = [[] for _ in range(n)]
+        for t_until, t_limit, table in self._segments(float(fss[0, layout.FS_T]), t_target, source):
+            src = self._source_table(table).as_tuple()
+            work = _WORK.arrays(ys.shape[1], src[0].size)
+            for p, on in enumerate(ons):
+                if not (on and on[0] is self and on[1] is table and on[2] == t_limit):
+                    fss[p, layout.FS_AHEAD_T1] = math.nan      # taken on another model or source: not valid
+            ons = [(self, table, t_limit) if go else on for go, on in zip(running.tolist(), ons, strict=True)]
+            counts = np.zeros(n, dtype=np.int64)
+            n_ev = k.advance_parts(ys, ivs, fss, aheads, running, status, t_until, t_limit, self._kernel_model, src,
+                                   work.batch_ev_i, work.batch_ev_f, counts, path,
+                                   work.records(layout.N_FIXED_COLUMNS + self.n_actuators, False),
+                                   work.scratch, work.st, work.aux, work.cur)
+            if n_ev:
+                ends = np.cumsum(counts)
+                for p in np.flatnonzero(counts).tolist():
+                    collected[p].append(EventList(work.batch_ev_i[ends[p] - counts[p]:ends[p]].copy(),
+                                                  work.batch_ev_f[ends[p] - counts[p]:ends[p]].copy()))
+        copies = []
+        for p, state in enumerate(states):
+            copy = FeederState.__new__(FeederState)
+            copy.y, copy.iv, copy.fs, copy.ahead = ys[p], ivs[p], fss[p], aheads[p]
+            copy.ahead_on, copy.x0 = ons[p], state.x0
+            copies.append(copy)
+            if status[p] not in (layout.DONE, layout.EVENTS_FULL):
+                raise SimulationError(self._failure(int(status[p]), copy))
+            if status[p] == layout.EVENTS_FULL:                 # too many events to batch: on alone
+                x_last = copy.x
+                rest, _ = self._integrate(copy, t_target, source, record=False)
+                path[p] += np.abs(np.diff([x_last, *rest.x, copy.x])).sum()
+                collected[p].append(rest)
+        peak = fss[:, layout.FS_MAX_SPEED].copy()
+        fss[:, layout.FS_MAX_SPEED] = np.maximum(run_max, peak)
+        return PartsAdvance(copies, [EventList.concatenate(e) for e in collected], peak, path)
 
     def settle(self, state: FeederState, source: StrokeTable | StrokeSchedule | None = None,
                max_time: float | None = None, step: float | None = None) -> EventList:
@@ -561,6 +604,16 @@ class FeederModel:
                 f'try a smaller integration.dt')
 
 
+class PartsAdvance(NamedTuple):
+    """What :meth:`FeederModel.advance_copies` returns, one entry per state: the advanced copies, their
+    events, their largest |ẋ| (m/s) and the distance along x between their start, events and end (m)."""
+
+    states: list[FeederState]
+    events: list[EventList]
+    peak_speed: np.ndarray
+    path: np.ndarray
+
+
 class _KernelWork:
     """The kernel's work arrays for one state size and channel count (what ``kernel.advance`` and
     ``kernel.observe`` take as ``ev_i``, ``ev_f``, ``scratch``, ``st``, ``aux``, ``cur``, ``dy``, ``rec``).
@@ -579,6 +632,8 @@ class _KernelWork:
         self.aux = np.zeros(layout.N_AUX)
         self.cur = np.zeros((n_channels, 2), dtype=np.int64)
         self.dy = np.zeros(n_y)
+        self.batch_ev_i = np.zeros((4096, 3), dtype=np.int64)     # kernel.advance_parts: every part's events
+        self.batch_ev_f = np.zeros((4096, 2))
         self._records: dict[tuple[int, bool], np.ndarray] = {}
 
     def records(self, n_columns: int, record: bool) -> np.ndarray:

@@ -193,16 +193,9 @@ class PartsModel:
         return state.t, state.positions, np.array([MODES.index(p.mode) for p in state.parts])
 
     def _trial(self, state: PartsState, t1: float, source: Source) -> _Trial:
-        chunk = t1 - state.t
-        parts, events, reach = [], [], np.zeros(len(state.parts))
-        for i, part in enumerate(state.parts):
-            trial = part.copy()
-            part_events, peak_speed = self.model.advance_with_peak_speed(trial, t1, source)
-            path = np.abs(np.diff([part.x, *part_events.x, trial.x])).sum()
-            reach[i] = REACH_SAFETY * peak_speed * chunk + path
-            parts.append(trial)
-            events.append(part_events)
-        return _Trial(parts, events, reach)
+        advanced = self.model.advance_copies(state.parts, t1, source)
+        reach = REACH_SAFETY * advanced.peak_speed * (t1 - state.t) + advanced.path
+        return _Trial(advanced.states, advanced.events, reach)
 
     def _chunk(self, state: PartsState, t1: float, source: Source, events: list[list[EventList]]) -> None:
         """Advance every part to ``t1`` or to the first impact before it (then apply it)."""
