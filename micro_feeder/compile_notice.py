@@ -9,8 +9,8 @@ from collections.abc import Callable
 from numba.core import event
 
 PHYSICS = 'micro_feeder.physics'
-NOTICE = ('compiling the physics kernel with numba (once after installing or upgrading: about 2.5 min on one '
-          'core; later runs load it from the cache in ~1.5 s) ...')
+NOTICE = ('compiling the physics kernel with numba (once after installing or upgrading: about 10 min on one '
+          'core and up to 7 GB of memory; later runs load it from the cache in ~1.5 s) ...')
 
 
 class KernelCompileNotice(event.Listener):

@@ -13,8 +13,11 @@ os.environ['ROS_LOG_DIR'] = tempfile.mkdtemp(prefix='micro-feeder-roslog-')
 os.environ.setdefault('MPLBACKEND', 'Agg')
 pytest_plugins = ['ros_helpers']
 
-# The physics kernel compiles once per installation (~2.5 min, docs/dynamics.md §6): here, before any test
+# The physics kernel compiles once per installation (~10 min, docs/dynamics.md §6): here, before any test
 # and outside the per-test timeout, rather than inside whichever test integrates first (~1.5 s once cached).
+# One part and several (the parts' batched call) both.
 from micro_feeder.physics.dynamics import FeederModel  # noqa: E402
+from micro_feeder.physics.parts import PartsModel  # noqa: E402
 
 FeederModel().run()
+PartsModel.from_settings({'particle.x0': [0.0, 0.5e-3]}).run(1e-3)

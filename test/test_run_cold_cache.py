@@ -1,6 +1,6 @@
 """``micro-feeder run --record`` on a fresh numba cache (the first run after installing): every compiled
 function is compiled while sim time is held at 0, none on the first tick or the first command, so the log
-starts at t = 0 and the poses arrive without a stall. One run with an empty ``NUMBA_CACHE_DIR``: ~2.5 min of
+starts at t = 0 and the poses arrive without a stall. One run with an empty ``NUMBA_CACHE_DIR``: ~10 min of
 compiling on an idle core (that is the point: a warm cache loads in ~1.5 s and hides a late compile)."""
 
 from __future__ import annotations

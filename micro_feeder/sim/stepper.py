@@ -69,12 +69,13 @@ class Stepper:
         self._warm_up()
 
     def _warm_up(self) -> None:
-        """Run every compiled function a tick or a command uses once, on copies, so that a first-call load
+        """Run every compiled function a tick, a spawn or a command uses once, on copies, so that a first-call load
         or compile (seconds with a cold numba cache, 10-40 ms warm) happens here and not under the simulator's
         lock inside the first tick or the first command: the kernel, and a quintic trajectory command
         (Hermite coefficients, its check against the piezo limits, its evaluation)."""
         parts = self.parts_state.copy()
         self._advance(parts, 1e-6, self.schedule)
+        self.model.advance_copies(parts.parts, 2e-6, self.schedule)    # several parts' call (a spawn may need it)
         self.model.observe(parts.parts[0], self.schedule)
         n = self.model.n_actuators
         schedule = StrokeSchedule.of_pieces(self.schedule.pieces)
@@ -131,7 +132,7 @@ class Stepper:
 
     def observe_parts(self) -> list[Observation]:
         """Every part's outputs now, in part order."""
-        return [self.model.observe(part, self.schedule) for part in self.parts_state.parts]
+        return self.model.observe_many(self.parts_state.parts, self.schedule)
 
     def command_trajectory(self, cmd: TrajectoryCommand) -> float:
         """Apply a checked trajectory: it replaces the schedule from its start time on (the stamp, or now

@@ -442,7 +442,7 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
 def advance_parts(ys: np.ndarray, ivs: np.ndarray, fss: np.ndarray, aheads: np.ndarray, running: np.ndarray,
                   status: np.ndarray, t_target: float, t_limit: float, model: KernelModel, src: tuple,
                   ev_i: np.ndarray, ev_f: np.ndarray, ev_count: np.ndarray, path: np.ndarray, rec: np.ndarray,
-                  scratch: np.ndarray, st: np.ndarray, aux: np.ndarray, cur: np.ndarray) -> int:
+                  record: int, scratch: np.ndarray, st: np.ndarray, aux: np.ndarray, cur: np.ndarray) -> int:
     """:func:`advance` for several parts' states at once, the rows of ``ys``, ``ivs``, ``fss`` (parts, ...) and
     ``aheads`` (parts, 2, y.size): one compiled call where a Python loop over the parts cost ~15 µs a part.
 
@@ -451,7 +451,10 @@ def advance_parts(ys: np.ndarray, ivs: np.ndarray, fss: np.ndarray, aheads: np.n
     the other (``ev_count[p]`` of them for part p, added to what was there), and ``path[p]`` grows by the
     distance along x between its start, its events and its end (m). A part whose events no longer fit, or
     whose integration fails, stops with its ``running`` flag cleared and its ``status`` set (EVENTS_FULL: the
-    caller goes on with it alone; an error as :func:`advance` gives it). Returns the events written."""
+    caller goes on with it alone; an error as :func:`advance` gives it). Returns the events written.
+
+    ``record`` is :func:`advance`'s flag, passed in (0) rather than written here: a literal 0 would be typed
+    ``Literal[int](0)`` and make numba compile a second copy of the whole kernel (minutes, GBs) for it."""
     n_ev = 0
     for p in range(ys.shape[0]):
         if not running[p]:
@@ -459,8 +462,8 @@ def advance_parts(ys: np.ndarray, ivs: np.ndarray, fss: np.ndarray, aheads: np.n
         y, iv, fs, ahead = ys[p], ivs[p], fss[p], aheads[p]
         x_last = y[0]
         while fs[FS_T] < t_target:
-            code, n, _ = advance(y, iv, fs, ahead, t_target, t_limit, model, src, ev_i[n_ev:], ev_f[n_ev:], rec, 0,
-                                 scratch, st, aux, cur)
+            code, n, _ = advance(y, iv, fs, ahead, t_target, t_limit, model, src, ev_i[n_ev:], ev_f[n_ev:], rec,
+                                 record, scratch, st, aux, cur)
             for k in range(n_ev, n_ev + n):
                 path[p] += abs(ev_f[k, 1] - x_last)
                 x_last = ev_f[k, 1]

@@ -430,7 +430,7 @@ class FeederModel:
             counts = np.zeros(n, dtype=np.int64)
             n_ev = k.advance_parts(ys, ivs, fss, aheads, running, status, t_until, t_limit, self._kernel_model, src,
                                    work.batch_ev_i, work.batch_ev_f, counts, path,
-                                   work.records(layout.N_FIXED_COLUMNS + self.n_actuators, False),
+                                   work.records(layout.N_FIXED_COLUMNS + self.n_actuators, False), 0,
                                    work.scratch, work.st, work.aux, work.cur)
             if n_ev:
                 ends = np.cumsum(counts)
@@ -471,7 +471,7 @@ class FeederModel:
         ``integration.settle_max`` more): the summary's ``settled`` says whether it came to rest."""
         state = self.initial_state() if state is None else state
         t_end = state.t + (self.default_duration() if duration is None else duration)
-        rows = [self._observe_row(state, source)[0]]
+        rows = [self._observe_rows([state], source)[0]]
         events: list[EventList] = []
         stops = [t_end] if output_step is None else \
             [*np.arange(state.t + output_step, t_end, output_step).tolist(), t_end]
@@ -519,11 +519,18 @@ class FeederModel:
 
     def observe(self, state: FeederState, source: StrokeTable | StrokeSchedule | None = None) -> Observation:
         """The outputs (docs/dynamics.md §4) at ``state.t`` (does not change the state)."""
-        row, st = self._observe_row(state, source)
-        values = row[0, :layout.N_FIXED_COLUMNS].tolist()     # Observation's fields are in column order
-        values[layout.C_MODE] = MODES[int(values[layout.C_MODE])]
-        return Observation(*values, strokes=row[0, layout.N_FIXED_COLUMNS:].copy(),
-                           stroke_velocities=st[1, :self.n_actuators].copy())
+        return self.observe_many([state], source)[0]
+
+    def observe_many(self, states: Sequence[FeederState], source: StrokeTable | StrokeSchedule | None = None
+                     ) -> list[Observation]:
+        """:meth:`observe` of several states at one sim time (the parts on a feeder), the strokes located once."""
+        rows, stroke_velocities = self._observe_rows(states, source)
+        n_fixed = layout.N_FIXED_COLUMNS
+        observations = []
+        for values, row, velocities in zip(rows[:, :n_fixed].tolist(), rows, stroke_velocities, strict=True):
+            values[layout.C_MODE] = MODES[int(values[layout.C_MODE])]    # Observation's fields are in column order
+            observations.append(Observation(*values, strokes=row[n_fixed:], stroke_velocities=velocities))
+        return observations
 
     # ------------------------------------------------------------------------------------------------
 
@@ -544,18 +551,26 @@ class FeederModel:
             return [(t1, math.inf, self._waveform if source is None else source)]
         return [(min(t_until, t1), t_until, table) for _, t_until, table in source.spans(t0, t1)]
 
-    def _observe_row(self, state: FeederState, source: StrokeTable | StrokeSchedule | None
-                     ) -> tuple[np.ndarray, np.ndarray]:
-        """The output row (1, columns) at ``state.t`` and the strokes' s, ṡ, s̈, s⃛ per channel (4, channels)
-        the kernel evaluated for it (the latter a work array: read it before the next kernel call)."""
-        self._check_state(state)
-        table = source.table_at(state.t) if isinstance(source, StrokeSchedule) else source
+    def _observe_rows(self, states: Sequence[FeederState], source: StrokeTable | StrokeSchedule | None
+                      ) -> tuple[np.ndarray, np.ndarray]:
+        """The output rows (states, columns) at the states' time (one for all) and each one's stroke rates ṡ per
+        channel (states, channels; m/s)."""
+        n = len(states)
+        if n and states[0].y.size != 4 + 2 * self._n_stacks:
+            self._check_state(states[0])
+        t = states[0].t if n else 0.0
+        table = source.table_at(t) if isinstance(source, StrokeSchedule) else source
         src = self._source_table(table).as_tuple()
-        work = _WORK.arrays(state.y.size, src[0].size)
-        k.locate_all(src, state.t, work.cur)
-        row = np.zeros((1, layout.N_FIXED_COLUMNS + self.n_actuators))
-        k.observe(state.t, state.y, state.iv, self._kernel_model, src, work.cur, work.st, work.aux, work.dy, row[0])
-        return row, work.st
+        work = _WORK.arrays(4 + 2 * self._n_stacks, src[0].size)
+        k.locate_all(src, t, work.cur)
+        rows = np.zeros((n, layout.N_FIXED_COLUMNS + self.n_actuators))
+        stroke_velocities = np.zeros((n, self.n_actuators))
+        for p, state in enumerate(states):
+            if state.y.size != work.dy.size:
+                self._check_state(state)
+            k.observe(t, state.y, state.iv, self._kernel_model, src, work.cur, work.st, work.aux, work.dy, rows[p])
+            stroke_velocities[p] = work.st[1, :self.n_actuators]
+        return rows, stroke_velocities
 
     def _integrate(self, state: FeederState, t_target: float,
                    source: StrokeTable | StrokeSchedule | None, record: bool
