@@ -27,6 +27,7 @@ from ros_helpers import wait_until
 from simulation_interfaces.action import SimulateSteps
 from simulation_interfaces.msg import EntityCategory, Result, SimulationState, SimulatorFeatures
 from simulation_interfaces.srv import (
+    DeleteEntity,
     GetEntities,
     GetEntitiesStates,
     GetEntityState,
@@ -34,6 +35,7 @@ from simulation_interfaces.srv import (
     GetSimulatorFeatures,
     ResetSimulation,
     SetSimulationState,
+    SpawnEntity,
     StepSimulation,
 )
 from std_msgs.msg import Float64MultiArray
@@ -139,11 +141,12 @@ def pose_key(state: Any) -> tuple:
 def test_features_and_the_start_state(session: Session) -> None:
     features = session.call(GetSimulatorFeatures, 'get_simulator_features').features
     assert sorted(features.features) == sorted([
+        SimulatorFeatures.SPAWNING, SimulatorFeatures.DELETING,
         SimulatorFeatures.ENTITY_STATE_GETTING, SimulatorFeatures.SIMULATION_RESET,
         SimulatorFeatures.SIMULATION_STATE_GETTING, SimulatorFeatures.SIMULATION_STATE_SETTING,
         SimulatorFeatures.SIMULATION_STATE_PAUSE, SimulatorFeatures.STEP_SIMULATION_SINGLE,
         SimulatorFeatures.STEP_SIMULATION_MULTIPLE, SimulatorFeatures.STEP_SIMULATION_ACTION])
-    assert 'part_0' in features.custom_info
+    assert 'part_0' in features.custom_info and list(features.spawn_formats) == ['part']
     assert session.state() == SimulationState.STATE_STOPPED       # started paused at t = 0
     entities = session.call(GetEntities, 'get_entities')
     assert entities.result.result == Result.RESULT_OK and list(entities.entities) == ['part_0']
@@ -332,3 +335,53 @@ def test_follow_joint_trajectory_tolerances_with_a_lagging_piezo(session: Sessio
             assert outcome.result.error_code == code, (grace_s, outcome.result.error_string)
     finally:
         _set_model(session, **{'piezo.enabled': False, 'piezo.natural_frequency': 50e3, 'piezo.damping': 0.7})
+
+
+def _spawn(session: Session, name: str, x: float, uri: str = 'part', allow_renaming: bool = False) -> Any:
+    request = SpawnEntity.Request(name=name, allow_renaming=allow_renaming)
+    request.entity_resource.uri = uri
+    request.initial_pose.header.frame_id = 'feeder'
+    request.initial_pose.pose.position.x = x
+    return session.call(SpawnEntity, 'spawn_entity', request)
+
+
+def _delete(session: Session, name: str) -> Result:
+    return session.call(DeleteEntity, 'delete_entity', DeleteEntity.Request(entity=name)).result
+
+
+def test_spawn_and_delete_entities(session: Session) -> None:
+    """Parts placed and removed while paused: the entities, their states and particles/poses follow; what cannot
+    be placed is answered with the standard's codes and a reason; a reset restores the parts of particle.x0."""
+    ok = Result.RESULT_OK
+    assert session.call(ResetSimulation, 'reset_simulation', ResetSimulation.Request()).result.result == ok
+    spawned = _spawn(session, 'guest', -0.5e-3)
+    assert spawned.result.result == ok and spawned.entity_name == 'guest', spawned.result.error_message
+    renamed = _spawn(session, 'guest', 1.5e-3, allow_renaming=True)
+    assert renamed.result.result == ok and renamed.entity_name == 'part_1'
+    for answer, code, reason in (
+            (_spawn(session, 'guest', 2e-3), SpawnEntity.Response.NAME_NOT_UNIQUE, 'exists'),
+            (_spawn(session, '', 2e-3), SpawnEntity.Response.NAME_INVALID, 'no name'),
+            (_spawn(session, '9lives', 2e-3), SpawnEntity.Response.NAME_INVALID, 'letters'),
+            (_spawn(session, 'x', 0.52e-3), SpawnEntity.Response.INVALID_POSE, 'overlaps'),
+            (_spawn(session, 'x', 2e-3, uri='model://box'), SpawnEntity.Response.UNSUPPORTED_FORMAT, 'part'),
+            (_spawn(session, 'x', 2e-3, uri=''), SpawnEntity.Response.NO_RESOURCE, 'uri')):
+        assert answer.result.result == code and reason in answer.result.error_message, answer.result
+    names = list(session.call(GetEntities, 'get_entities').entities)
+    assert names == ['guest', 'part_0', 'part_1']                 # in order along the feeder
+    session.probe.step(session.executor, 3)
+    states = session.call(GetEntitiesStates, 'get_entities_states')
+    assert [s.pose.position.x for s in states.states] == [-0.5e-3, 0.5e-3, 1.5e-3]
+    poses = session.probe.msgs['particles/poses'][-1]
+    assert [p.position.x for p in poses.poses] == [-0.5e-3, 0.5e-3, 1.5e-3]
+    assert session.probe.msgs['particle/pose'][-1].pose.position.x == -0.5e-3      # part 0: the first in order
+    assert _delete(session, 'guest').result == ok
+    assert _delete(session, 'guest').result == Result.RESULT_NOT_FOUND
+    assert _delete(session, 'part_0').result == ok
+    last = _delete(session, 'part_1')
+    assert last.result == Result.RESULT_OPERATION_FAILED and 'last part' in last.error_message
+    changes = session.probe.msgs['simulator/entity_changes']
+    assert [(c.status[0].message, c.status[0].values[0].value) for c in changes[-4:]] == [
+        ('spawned', 'guest'), ('spawned', 'part_1'), ('deleted', 'guest'), ('deleted', 'part_0')]
+    reset = session.call(ResetSimulation, 'reset_simulation', ResetSimulation.Request()).result
+    assert reset.result == ok
+    assert list(session.call(GetEntities, 'get_entities').entities) == ['part_0']

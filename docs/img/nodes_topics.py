@@ -36,6 +36,7 @@ STATE = [
     ('simulator/command_receipts', 'std_msgs/Header', 'reliable, volatile, depth 100'),
     ('simulator/trajectories_received', 'trajectory_msgs/JointTrajectory', 'reliable, volatile, depth 100'),
     ('simulator/command_status', 'diagnostic_msgs/DiagnosticArray', 'reliable, volatile, depth 100'),
+    ('simulator/entity_changes', 'diagnostic_msgs/DiagnosticArray', 'reliable, transient local, keep last 1000'),
     ('/clock', 'rosgraph_msgs/Clock', 'best effort, volatile, depth 1'),
     ('/diagnostics', 'diagnostic_msgs/DiagnosticArray', 'reliable, volatile, depth 10'),
 ]
@@ -54,7 +55,8 @@ def topic(ax, x: float, y: float, name: str, kind: str, qos: str, w: float = 4.6
     ax.add_patch(FancyBboxPatch((x - w / 2, y - 0.36), w, 0.72, boxstyle='round,pad=0.01,rounding_size=0.08',
                                 fc=TOPIC_COLOUR, ec='#999999', lw=0.8))
     ax.text(x, y + 0.1, name, ha='center', va='center', fontsize=9.5, family='monospace')
-    ax.text(x, y - 0.19, f'{kind} · {qos}', ha='center', va='center', fontsize=6.6, color='#555555')
+    line = f'{kind} · {qos}'
+    ax.text(x, y - 0.19, line, ha='center', va='center', fontsize=6.6 if len(line) < 72 else 5.4, color='#555555')
 
 
 def arrow(ax, start: tuple[float, float], end: tuple[float, float], rad: float = 0.0, **style) -> None:

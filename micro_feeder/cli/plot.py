@@ -51,20 +51,39 @@ def _plot_parts(log, args: argparse.Namespace):
     rows = []
     for m in log.messages(['particles/states'], decoded=True):
         dims = m.message.layout.dim
-        if len(dims) == 2 and dims[0].size > 1:
+        if len(dims) == 2 and dims[0].size > 0:
             rows.append((dims[1].label.split(','), np.asarray(m.message.data).reshape(dims[0].size, dims[1].size)))
-    if not rows:
+    if not rows or max(table.shape[0] for _, table in rows) < 2:
         return None
-    fields, first = rows[0]
-    rows = [table for labels, table in rows if labels == fields and table.shape == first.shape]
-    tables = np.stack(rows)
+    fields = rows[0][0]
+    same = [table for labels, table in rows if labels == fields]
+    changed = len({table.shape for table in same}) > 1
+    tables = _stack_parts(same)
     t = tables[:, 0, fields.index('t')]
+    t = np.where(np.isnan(t), np.roll(t, -1), t)       # a row between two numbers of parts: the next row's time
     keep = ((args.start is None) | (t >= (args.start or 0.0))) & ((args.end is None) | (t <= (args.end or np.inf)))
     output = Path(args.output)
     path = output.with_name(f'{output.stem}_parts{output.suffix or ".png"}')
     try:
         return plot_positions(t[keep], tables[keep, :, fields.index('x')], tables[keep, :, fields.index('mode')],
                               path, f'{tables.shape[1]} parts of {log.path.name}: position against time '
-                              '(impacts are not recorded)')
+                              '(impacts are not recorded)' + (' - parts spawned or deleted: a line ends where the '
+                                                              'parts changed' if changed else ''))
     except OSError as err:
         raise CommandError(f'cannot write {path}: {err}') from None
+
+
+def _stack_parts(tables: list):
+    """(rows, parts, fields) of per-message (parts, fields) tables whose number of parts changes (parts spawned
+    or deleted): padded with NaN to the most parts, and a NaN row where the number changes, so that no line joins
+    a part before the change to another after it."""
+    import numpy as np
+
+    most = max(table.shape[0] for table in tables)
+    out, last = [], tables[0].shape[0]
+    for table in tables:
+        if table.shape[0] != last:
+            out.append(np.full((most, table.shape[1]), np.nan))
+            last = table.shape[0]
+        out.append(np.vstack([table, np.full((most - table.shape[0], table.shape[1]), np.nan)]))
+    return np.stack(out)

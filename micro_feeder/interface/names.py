@@ -9,8 +9,15 @@ from ..physics.dynamics import MODES, TRANSITION_KINDS
 FEEDER_FRAME = 'feeder'     # x along the feeder, z up, y to the left
 CONTACT_FRAME = 'contact'   # at the part: x along the surface tangent, z along its normal
 
-__all__ = ['CONTACT_FRAME', 'FEEDER_FRAME', 'MODES', 'TRANSITION_KINDS', 'joint_names', 'receipt_frame',
-           'split_receipt_frame', 'split_window_id', 'window_id']
+__all__ = ['CONTACT_FRAME', 'FEEDER_FRAME', 'MODES', 'TRANSITION_KINDS', 'joint_names', 'part_entity',
+           'receipt_frame', 'split_receipt_frame', 'split_window_id', 'window_id']
+
+
+def part_entity(number: int) -> str:
+    """A part's entity name (simulation_interfaces): ``part_0``, ``part_1``, ... for the parts of
+    ``particle.x0`` in order along the feeder; a spawned part without a name of its own takes the next unused
+    number."""
+    return f'part_{number}'
 
 
 def joint_names(n_actuators: int) -> list[str]:

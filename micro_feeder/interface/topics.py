@@ -39,6 +39,7 @@ TOPICS: tuple[TopicSpec, ...] = (
     TopicSpec('simulator/command_receipts', 'std_msgs/msg/Header', depth=100),
     TopicSpec('simulator/trajectories_received', 'trajectory_msgs/msg/JointTrajectory', depth=100),
     TopicSpec('simulator/command_status', 'diagnostic_msgs/msg/DiagnosticArray', depth=100),
+    TopicSpec('simulator/entity_changes', 'diagnostic_msgs/msg/DiagnosticArray', transient_local=True, depth=1000),
     TopicSpec('/clock', 'rosgraph_msgs/msg/Clock', reliable=False, depth=1),
     TopicSpec('/diagnostics', 'diagnostic_msgs/msg/DiagnosticArray', depth=10),
 )
@@ -46,6 +47,7 @@ TOPICS: tuple[TopicSpec, ...] = (
 TOPICS_BY_NAME = {spec.name: spec for spec in TOPICS}
 
 COMMAND_TOPICS = ('actuator/trajectory', 'actuator/command')   # what the simulator takes commands on
+ENTITY_CHANGES = 'simulator/entity_changes'     # parts spawned and deleted (SpawnEntity, DeleteEntity), for resim
 # The simulator's copy of every message it received on a command topic, as received: in a log it holds the
 # commands of senders the recorder had not discovered yet (a sender's first burst, on a loaded machine).
 RECEIVED_COPIES = {'actuator/trajectory': 'simulator/trajectories_received'}

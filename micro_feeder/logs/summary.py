@@ -15,7 +15,8 @@ import datetime
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..interface.topics import COMMAND_TOPICS
+from ..interface.entity_changes import read_entity_changes
+from ..interface.topics import COMMAND_TOPICS, ENTITY_CHANGES
 from ..physics.dynamics import MODES
 from .coverage import Coverage, end_line, missing_command_lines, stall_lines
 from .reader import LogReader
@@ -94,6 +95,7 @@ class LogSummary:
     recorder_source: str = ''  # 'summary', 'diagnostics' or ''
     start: MissingStart = field(default_factory=MissingStart)
     parts: list[PartState] = field(default_factory=list)    # every part (particles/*), with several
+    entity_changes: dict[str, int] = field(default_factory=dict)    # parts 'spawned' / 'deleted' during the run
 
     @property
     def message_count(self) -> int:
@@ -189,9 +191,27 @@ def summarize(log: LogReader) -> LogSummary:
     if state is not None:
         part.mode = state.message.data
     counters, source = recorder_counters(log)
+    changes = _entity_changes(log)
+    parts = _parts(log)
+    if changes:         # part k at the end is not part k at the start: no distance by index
+        part.first_x = None
+        for q in parts:
+            q.first_x = None
     return LogSummary(log.path, log.files, sum(f.stat().st_size for f in log.files), log.truncated,
                       log.start_ns, log.duration, rows, part, simulator_run(log), counters, source,
-                      missing_start(log, part, counters), _parts(log))
+                      missing_start(log, part, counters), parts, changes)
+
+
+def _entity_changes(log: LogReader) -> dict[str, int]:
+    """Parts spawned and deleted during the run, counted by kind (``simulator/entity_changes``)."""
+    counts: dict[str, int] = {}
+    for m in log.messages([ENTITY_CHANGES] if log.resolve(ENTITY_CHANGES) else [], decoded=True):
+        try:
+            for change in read_entity_changes(m.message):
+                counts[change.kind] = counts.get(change.kind, 0) + 1
+        except ValueError:
+            counts['unreadable'] = counts.get('unreadable', 0) + 1
+    return counts
 
 
 def _parts(log: LogReader) -> list[PartState]:
@@ -294,10 +314,14 @@ def format_summary(s: LogSummary, coverage: Coverage | None = None) -> str:
         lines.append(f'part       {where}; mode {p.mode or "unknown"}')
         if p.x is not None and p.first_x is not None:
             lines.append(f'           moved {(p.x - p.first_x) * 1e6:+.3f} µm since t = {p.first_stamp:.4f} s')
+    if s.entity_changes:
+        lines.append('parts      ' + ', '.join(f'{n} {kind}' for kind, n in sorted(s.entity_changes.items()))
+                     + ' during the run (simulator/entity_changes): distances by part index not shown')
     if s.parts:
         lines.append(f'parts      {len(s.parts)} (particles/poses) at t = {s.parts[0].stamp:.4f} s:')
-        lines += [f'  {k:>7d}  x = {q.x * 1e3:.4f} mm, z = {q.z * 1e6:.3f} µm, moved {(q.x - q.first_x) * 1e6:+.3f} µm;'
-                  f' mode {q.mode or "unknown"}' for k, q in enumerate(s.parts)]
+        lines += [f'  {k:>7d}  x = {q.x * 1e3:.4f} mm, z = {q.z * 1e6:.3f} µm'
+                  + (f', moved {(q.x - q.first_x) * 1e6:+.3f} µm' if q.first_x is not None else '')
+                  + f'; mode {q.mode or "unknown"}' for k, q in enumerate(s.parts)]
     lines += _loss_lines(s, coverage)
     return '\n'.join(lines)
 

@@ -31,6 +31,7 @@ from simulation_interfaces.msg import (
     SimulatorFeatures,
 )
 from simulation_interfaces.srv import (
+    DeleteEntity,
     GetEntities,
     GetEntitiesStates,
     GetEntityState,
@@ -38,6 +39,7 @@ from simulation_interfaces.srv import (
     GetSimulatorFeatures,
     ResetSimulation,
     SetSimulationState,
+    SpawnEntity,
     StepSimulation,
 )
 from std_msgs.msg import Header
@@ -45,16 +47,18 @@ from std_srvs.srv import SetBool, Trigger
 
 from ..interface import stamps
 from ..interface.messages import tilt_quaternion
-from ..interface.names import FEEDER_FRAME
+from ..interface.names import FEEDER_FRAME, part_entity
 from ..physics.dynamics import Observation
 from ._ros import SERVICE_QOS
 
-PART_ENTITY = 'part_{}'         # the parts' entity names, by index along the feeder: part_0, part_1, ...
 # Feedback comes every step: a deep history, so a client with the same depth misses none (default depth 10)
 FEEDBACK_QOS = QoSProfile(depth=1000)
+ENTITY_NAME = re.compile(r'[A-Za-z_][A-Za-z0-9_]*')      # a spawned part's name
 MAX_SERVICE_STEPS = 10_000      # StepSimulation steps per call: the service holds the executor while it steps
 
 FEATURES = [
+    SimulatorFeatures.SPAWNING,
+    SimulatorFeatures.DELETING,
     SimulatorFeatures.ENTITY_STATE_GETTING,
     SimulatorFeatures.SIMULATION_RESET,
     SimulatorFeatures.SIMULATION_STATE_GETTING,
@@ -65,13 +69,19 @@ FEATURES = [
     SimulatorFeatures.STEP_SIMULATION_ACTION,
 ]
 # A reset restores sim time and state together: every command is keyed on sim time, so neither alone is a
-# state this simulator can be in. Nothing is ever spawned, so SCOPE_SPAWNED has nothing to act on.
+# state this simulator can be in; it also restores the parts of particle.x0 (spawned ones go, deleted ones
+# come back), so SCOPE_SPAWNED alone is not a reset this simulator does.
 FULL_RESET_SCOPES = (ResetSimulation.Request.SCOPE_DEFAULT, ResetSimulation.Request.SCOPE_ALL,
                      ResetSimulation.Request.SCOPE_TIME | ResetSimulation.Request.SCOPE_STATE)
+PART_RESOURCE = 'part'     # SpawnEntity's entity_resource.uri: the one part type particle.* describes
+SPAWN_FORMATS = [PART_RESOURCE]
 CUSTOM_INFO = ('micro_feeder simulator: entities part_0, part_1, ... (one per particle.x0 entry, in order along the '
                'feeder; point masses; pose and twist in frame feeder, '
-               'acceleration not reported). ResetSimulation: SCOPE_DEFAULT, SCOPE_ALL or SCOPE_TIME|SCOPE_STATE '
-               '(time and state together only). A step is the step_period parameter. Commands: '
+               'acceleration not reported). SpawnEntity: entity_resource.uri "part" (the part of particle.*), placed '
+               'at initial_pose.position.x at rest on the surface; DeleteEntity removes a part (not the last). '
+               'ResetSimulation: SCOPE_DEFAULT, SCOPE_ALL or SCOPE_TIME|SCOPE_STATE '
+               '(time and state together, the parts of particle.x0 restored). A step is the step_period parameter. '
+               'Commands: '
                'control_msgs/action/FollowJointTrajectory ~/follow_joint_trajectory, actuator/trajectory. '
                'See docs/interface.md.')
 
@@ -92,7 +102,11 @@ class ControlledSimulator(Protocol):
 
     def step(self) -> tuple[bool, str]: ...
 
-    def observe_parts(self) -> list[Observation]: ...
+    def observe_entities(self) -> tuple[list[str], list[Observation]]: ...
+
+    def spawn_part(self, name: str, x: float) -> tuple[bool, str]: ...
+
+    def delete_part(self, name: str) -> tuple[bool, str]: ...
 
 
 def result(code: int, message: str = '') -> Result:
@@ -111,7 +125,7 @@ def entity_state(obs: Observation) -> EntityState:
     return state
 
 
-def match_entities(filters: EntityFilters, observe: Callable[[], list[Observation]]
+def match_entities(filters: EntityFilters, observe: Callable[[], tuple[list[str], list[Observation]]]
                    ) -> tuple[Result, list[str], list[Observation]]:
     """The entities ``filters`` select, with their states: a name regular expression (searched, Python's
     syntax, which reads POSIX extended expressions of names alike) and sphere bounds (the part's position
@@ -128,15 +142,15 @@ def match_entities(filters: EntityFilters, observe: Callable[[], list[Observatio
                       'TYPE_SPHERE are supported'), [], []
     if bounds.type == Bounds.TYPE_SPHERE and len(bounds.points) < 2:
         return result(Result.RESULT_OPERATION_FAILED, 'sphere bounds need 2 points: centre, (radius, 0, 0)'), [], []
-    parts = observe()
+    names, parts = observe()
     try:
-        chosen = [k for k in range(len(parts)) if re.search(filters.filter, PART_ENTITY.format(k))]
+        chosen = [k for k in range(len(parts)) if re.search(filters.filter, names[k])]
     except re.error as err:
         return result(Result.RESULT_OPERATION_FAILED, f'filter {filters.filter!r}: {err}'), [], []
     if bounds.type == Bounds.TYPE_SPHERE:
         c, radius = bounds.points[0], bounds.points[1].x
         chosen = [k for k in chosen if math.dist((parts[k].x, 0.0, parts[k].z), (c.x, c.y, c.z)) <= radius]
-    return result(Result.RESULT_OK), [PART_ENTITY.format(k) for k in chosen], [parts[k] for k in chosen]
+    return result(Result.RESULT_OK), [names[k] for k in chosen], [parts[k] for k in chosen]
 
 
 class SimulationControl:
@@ -160,6 +174,8 @@ class SimulationControl:
             (GetEntities, 'get_entities', self._on_entities),
             (GetEntitiesStates, 'get_entities_states', self._on_entities_states),
             (GetEntityState, 'get_entity_state', self._on_entity_state),
+            (SpawnEntity, 'spawn_entity', self._on_spawn),
+            (DeleteEntity, 'delete_entity', self._on_delete),
         ]
         for srv_type, name, callback in services + self._aliases():
             node.create_service(srv_type, f'~/{name}', callback, qos_profile=SERVICE_QOS)
@@ -193,7 +209,7 @@ class SimulationControl:
                 (Trigger, 'step', lambda _req, res: answer(res, self._sim.step()))]
 
     def _on_features(self, _request: Any, response: GetSimulatorFeatures.Response) -> GetSimulatorFeatures.Response:
-        response.features = SimulatorFeatures(features=FEATURES, spawn_formats=[], custom_info=CUSTOM_INFO)
+        response.features = SimulatorFeatures(features=FEATURES, spawn_formats=SPAWN_FORMATS, custom_info=CUSTOM_INFO)
         return response
 
     def _on_get_state(self, _request: Any, response: GetSimulationState.Response) -> GetSimulationState.Response:
@@ -253,14 +269,14 @@ class SimulationControl:
         if request.scope not in FULL_RESET_SCOPES:
             response.result = result(Result.RESULT_FEATURE_UNSUPPORTED, f'scope {request.scope}: sim time and state '
                                      'reset together only (SCOPE_DEFAULT, SCOPE_ALL or SCOPE_TIME|SCOPE_STATE); '
-                                     'no entity is ever spawned')
+                                     'spawned parts go and deleted ones come back with every reset)')
             return response
         ok, message = self._sim.reset()
         response.result = result(Result.RESULT_OK if ok else Result.RESULT_OPERATION_FAILED, message)
         return response
 
-    def _observe(self) -> list[Observation]:
-        return self._sim.observe_parts()
+    def _observe(self) -> tuple[list[str], list[Observation]]:
+        return self._sim.observe_entities()
 
     def _on_entities(self, request: GetEntities.Request, response: GetEntities.Response) -> GetEntities.Response:
         try:
@@ -281,8 +297,7 @@ class SimulationControl:
     def _on_entity_state(self, request: GetEntityState.Request,
                          response: GetEntityState.Response) -> GetEntityState.Response:
         try:
-            parts = self._observe()
-            names = [PART_ENTITY.format(k) for k in range(len(parts))]
+            names, parts = self._observe()
             if request.entity not in names:
                 response.result = result(Result.RESULT_NOT_FOUND, f'no entity {request.entity!r} (entities: '
                                          f'{names[0]} ... {names[-1]})' if len(names) > 1 else
@@ -290,6 +305,64 @@ class SimulationControl:
                 return response
             response.state = entity_state(parts[names.index(request.entity)])
             response.result = result(Result.RESULT_OK)
+        except Busy as err:
+            response.result = result(Result.RESULT_OPERATION_FAILED, str(err))
+        return response
+
+    def _on_spawn(self, request: SpawnEntity.Request, response: SpawnEntity.Response) -> SpawnEntity.Response:
+        code, message, name = self._spawn(request)
+        if code == Result.RESULT_OK:
+            try:
+                ok, message = self._sim.spawn_part(name, request.initial_pose.pose.position.x)
+                code = Result.RESULT_OK if ok else SpawnEntity.Response.INVALID_POSE
+            except Busy as err:
+                code, message = Result.RESULT_OPERATION_FAILED, str(err)
+        response.result = result(code, message)
+        response.entity_name = name if code == Result.RESULT_OK else ''
+        return response
+
+    def _spawn(self, request: SpawnEntity.Request) -> tuple[int, str, str]:
+        """(result code, reason, entity name) of a spawn request before the simulator is asked: the resource,
+        the namespace, the frame, the name (taken or made)."""
+        uri, resource_string = request.entity_resource.uri, request.entity_resource.resource_string
+        if not uri and not resource_string:
+            return SpawnEntity.Response.NO_RESOURCE, f'entity_resource: give uri "{PART_RESOURCE}"', ''
+        if uri != PART_RESOURCE:
+            return SpawnEntity.Response.UNSUPPORTED_FORMAT, (f'entity_resource {uri or "resource_string"!r}: only '
+                                                             f'uri "{PART_RESOURCE}" (the part of particle.*)'), ''
+        if request.entity_namespace:
+            return SpawnEntity.Response.NAMESPACE_INVALID, 'a part has no interfaces of its own: leave ' \
+                                                           'entity_namespace empty', ''
+        frame = request.initial_pose.header.frame_id
+        if frame not in ('', FEEDER_FRAME, 'world'):
+            return SpawnEntity.Response.INVALID_POSE, f'frame {frame!r}: positions are in {FEEDER_FRAME!r}', ''
+        x = request.initial_pose.pose.position.x
+        if not math.isfinite(x):
+            return SpawnEntity.Response.INVALID_POSE, f'position.x = {x}: not a number', ''
+        try:
+            names, _ = self._observe()
+        except Busy as err:
+            return Result.RESULT_OPERATION_FAILED, str(err), ''
+        name = request.name
+        if name and not ENTITY_NAME.fullmatch(name):
+            return SpawnEntity.Response.NAME_INVALID, (f'name {name!r}: letters, digits and _, not starting with a '
+                                                       'digit'), ''
+        if not name or name in names:
+            if not request.allow_renaming:
+                return ((SpawnEntity.Response.NAME_NOT_UNIQUE, f'an entity named {name!r} exists (set '
+                         'allow_renaming to get another name)', '') if name else
+                        (SpawnEntity.Response.NAME_INVALID, 'no name given (give one, or set allow_renaming)', ''))
+            name = next(part_entity(k) for k in range(len(names) + 1) if part_entity(k) not in names)
+        return Result.RESULT_OK, '', name
+
+    def _on_delete(self, request: DeleteEntity.Request, response: DeleteEntity.Response) -> DeleteEntity.Response:
+        try:
+            names, _ = self._observe()
+            if request.entity not in names:
+                response.result = result(Result.RESULT_NOT_FOUND, f'no entity {request.entity!r}')
+                return response
+            ok, message = self._sim.delete_part(request.entity)
+            response.result = result(Result.RESULT_OK if ok else Result.RESULT_OPERATION_FAILED, message)
         except Busy as err:
             response.result = result(Result.RESULT_OPERATION_FAILED, str(err))
         return response

@@ -30,7 +30,7 @@ import math
 import sys
 import threading
 import time
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from copy import deepcopy
 from typing import Any
 
@@ -50,9 +50,10 @@ from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from ..interface import messages, stamps, wire
+from ..interface.entity_changes import DELETED, SPAWNED, EntityChange
 from ..interface.names import joint_names, receipt_frame
 from ..interface.parts_messages import PartsMessages
-from ..interface.topics import RECEIVED_COPIES
+from ..interface.topics import ENTITY_CHANGES, RECEIVED_COPIES
 from ..interface.transitions import TransitionEncoder
 from ..physics.dynamics import Event, Observation, SimulationError
 from ..physics.parameters import ParameterError, ParamSpec
@@ -180,6 +181,7 @@ class Simulator(Node):
         self._pub_parameters = self._publisher(ParameterEvent, 'simulator/parameters', '~/parameters')
         self._pub_receipts = self._publisher(Header, 'simulator/command_receipts', '~/command_receipts')
         self._pub_status = self._publisher(DiagnosticArray, 'simulator/command_status', '~/command_status')
+        self._pub_entity_changes = self._publisher(DiagnosticArray, ENTITY_CHANGES, '~/entity_changes')
         self._pub_received = {topic: self._publisher(COMMAND_TYPES[topic], copy, '~/' + copy.split('/')[-1])
                               for topic, copy in RECEIVED_COPIES.items()}
         for topic, msg_type in COMMAND_TYPES.items():
@@ -656,6 +658,36 @@ class Simulator(Node):
         """Every part's state now, in part order (as :meth:`observe`)."""
         with self._locked(self._lock):
             return self._stepper.observe_parts()
+
+    def observe_entities(self) -> tuple[list[str], list[Observation]]:
+        """Every part's entity name and state now, in part order."""
+        with self._locked(self._lock):
+            return list(self._stepper.entity_names), self._stepper.observe_parts()
+
+    def spawn_part(self, name: str, x: float) -> tuple[bool, str]:
+        """SpawnEntity: a part named ``name`` placed at ``x`` (m) now, at rest (:meth:`Stepper.spawn_part`);
+        recorded on ``simulator/entity_changes``. (success, message: the reason of a refusal)."""
+        return self._change_parts(SPAWNED, name, lambda: self._stepper.spawn_part(name, x))
+
+    def delete_part(self, name: str) -> tuple[bool, str]:
+        """DeleteEntity: the part named ``name`` removed now (:meth:`Stepper.delete_part`), recorded as a spawn."""
+        return self._change_parts(DELETED, name, lambda: self._stepper.delete_part(name))
+
+    def _change_parts(self, kind: str, name: str, change: Callable[[], int]) -> tuple[bool, str]:
+        with self._locked(self._lock):
+            stepper = self._stepper
+            before = dict(zip(stepper.entity_names, stepper.parts_state.positions.tolist(), strict=True))
+            try:
+                index = change()
+            except ValueError as err:
+                return False, str(err)
+            x = before[name] if kind == DELETED else stepper.parts_state.parts[index].x
+            change_record = EntityChange(kind, name, index, stepper.t, x)
+            self._parts_messages = PartsMessages(stepper.n_parts)
+            self._pub_entity_changes.publish(change_record.message(self.get_fully_qualified_name()))
+        message = f'{name} {kind} at x = {x * 1e3:.6g} mm, t = {change_record.t:.9f} s: {stepper.n_parts} parts'
+        self.get_logger().info(message)
+        return True, message
 
     def follow(self, message: JointTrajectory | None = None) -> tuple[int, float, TrajectoryCommand]:
         """Check and apply a FollowJointTrajectory goal's trajectory (None: an empty one, which holds the

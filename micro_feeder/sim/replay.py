@@ -26,6 +26,8 @@ What it reads from the log (all recorded by default, see docs/logs.md):
 * ``simulator/trajectories_received``: the simulator's copy of every trajectory it received, when the log
   has it (whatever senders the recorder had discovered), else ``actuator/trajectory`` as recorded; and
   ``actuator/command``.
+* ``simulator/entity_changes``: parts spawned and deleted (SpawnEntity, DeleteEntity), applied at their sim
+  time as the simulator did: after the pose of the stop they were made at.
 * ``particle/pose``: the stop times and the reference trajectory. The simulator stops its integration
   at every published pose; the stamps are rounded to 1 ns, so the exact stop times are rebuilt as
   the simulator computed them, ``t + step_period`` per step (stepped mode, or ``real_time_factor`` 0),
@@ -51,9 +53,10 @@ import numpy as np
 
 from ..interface import trajectory_cdr
 from ..interface.cdr import read_pose_xz
+from ..interface.entity_changes import SPAWNED, read_entity_changes
 from ..interface.names import joint_names, split_receipt_frame
 from ..interface.stamps import header_frame_id, to_ns
-from ..interface.topics import COMMAND_TOPICS
+from ..interface.topics import COMMAND_TOPICS, ENTITY_CHANGES
 from ..logs.reader import LogMessage, LogReader
 from ..logs.sim_parameters import recorded_parameters
 from ..physics.dynamics import Observation, SimulationError
@@ -287,10 +290,23 @@ class LogRecording:
         return self._stop_times.stops(self._first_run())
 
     def iter_commands(self) -> Iterator[Command]:
-        """The commands in receipt order with their receipt times (the counts behind :attr:`notes` are
-        final when the iterator ends)."""
+        """The commands in receipt order with their receipt times, and the parts spawned and deleted at their
+        sim times (topic ``simulator/entity_changes``; the counts behind :attr:`notes` are final when the
+        iterator ends)."""
         self._counts = {}
-        return self._paired() if self.receipts == 'recorded' else self._estimated()
+        commands = self._paired() if self.receipts == 'recorded' else self._estimated()
+        return heapq.merge(commands, self._entity_changes(), key=lambda cmd: cmd.receipt_ns)
+
+    def _entity_changes(self) -> Iterator[Command]:
+        """The recorded entity changes in stamp order, up to the first that goes back in time (a reset)."""
+        last = 0
+        for m in self.log.messages([ENTITY_CHANGES] if self.log.resolve(ENTITY_CHANGES) else [], decoded=True):
+            ns = m.stamp_ns or 0
+            if ns < last:
+                return
+            last = ns
+            self._counts['entity_changes'] = self._counts.get('entity_changes', 0) + 1
+            yield Command(ns, ENTITY_CHANGES, m)
 
     # -- reading --------------------------------------------------------------------------------------
     def _first_run(self) -> Iterator[tuple[int, float, float]]:
@@ -443,10 +459,18 @@ def read_recording(log: LogReader) -> Recording:
 
 
 def apply_command(stepper: Stepper, cmd: Command) -> bool:
-    """Apply one command through the simulator's own checks; False when they refuse it."""
+    """Apply one command through the simulator's own checks; False when they refuse it. An entity change
+    spawns or deletes parts as the simulator did (False when the stepper refuses it: the log and the model
+    disagree)."""
     n = stepper.model.n_actuators
     try:
-        if cmd.topic == 'actuator/trajectory':
+        if cmd.topic == ENTITY_CHANGES:
+            for change in read_entity_changes(cmd.message):
+                if change.kind == SPAWNED:
+                    stepper.spawn_part(change.entity, change.x)
+                else:
+                    stepper.delete_part(change.entity)
+        elif cmd.topic == 'actuator/trajectory':
             stepper.command_trajectory(parse_trajectory_cdr(cmd.recorded.data, joint_names(n), stepper.limits,
                                                             deserialize=lambda _: cmd.message))
         else:
@@ -458,9 +482,11 @@ def apply_command(stepper: Stepper, cmd: Command) -> bool:
 
 def replay(stepper: Stepper, recording: Replayable, on_pose: Callable[[Stop, Observation], None], *,
            on_command: Callable[[bool], None] | None = None,
+           on_entity_change: Callable[[bool], None] | None = None,
            progress: Callable[[int, int], None] | None = None) -> SimulationError | None:
     """Drive ``stepper`` (fresh, at t = 0) through the recording's stops and commands as the simulator did,
-    calling ``on_pose(stop, observation)`` at each recorded pose and ``on_command(applied)`` per command;
+    calling ``on_pose(stop, observation)`` at each recorded pose, ``on_command(applied)`` per command and
+    ``on_entity_change(applied)`` per recorded spawn or delete;
     ``progress(recorded poses done, recorded poses)`` now and then. Returns the integration's failure,
     which ends the replay, or None when it reached the last stop. The stops and the commands are read to
     their ends either way (what a :class:`LogRecording` says about the log counts them all)."""
@@ -470,8 +496,9 @@ def replay(stepper: Stepper, recording: Replayable, on_pose: Callable[[Stop, Obs
 
     def receive(cmd: Command) -> Command | None:
         applied = apply_command(stepper, cmd)
-        if on_command is not None:
-            on_command(applied)
+        counter = on_entity_change if cmd.topic == ENTITY_CHANGES else on_command
+        if counter is not None:
+            counter(applied)
         return next(pending, None)
 
     failure = None

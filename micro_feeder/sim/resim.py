@@ -150,16 +150,35 @@ def resimulate(log: LogReader, overrides: Mapping[str, Any] | None = None, *,
         notes.append(f'the log has no particles/poses: only part 0 of {stepper.n_parts} compared')
     report.parts = stepper.n_parts if part_poses is not None else 1
 
+    changes = {True: 0, False: 0}
+    miscounted: list[float] = []       # stamps where the parts re-simulated and recorded differ in number
+
     def compare(stop: Stop, obs: Observation) -> None:
         _compare(obs, stop, report)
         recorded = part_poses.get(stop.ns) if part_poses is not None else None
         if recorded is not None:
-            for part, (x, z) in zip(stepper.observe_parts(), recorded, strict=True):
+            parts = stepper.observe_parts()
+            if len(parts) != len(recorded):
+                miscounted.append(stop.ns * 1e-9)
+                return
+            for part, (x, z) in zip(parts, recorded, strict=True):
                 _compare(part, replace(stop, pose=(x, z)), report, count=False)
 
-    failure = replay(stepper, recording, compare, on_command=count, progress=progress)
+    def count_change(applied: bool) -> None:
+        changes[applied] += 1
+
+    failure = replay(stepper, recording, compare, on_command=count, on_entity_change=count_change,
+                     progress=progress)
     if failure is not None:
         notes.append(f'the re-simulation failed at t = {stepper.t:.6f} s: {failure}; compared up to there')
+    if changes[True] or changes[False]:
+        notes.append(f'{changes[True]} parts spawned or deleted during the run (simulator/entity_changes), applied '
+                     'at their sim times' + (f'; {changes[False]} refused by the model re-simulated' if changes[False]
+                                             else ''))
+    if miscounted:
+        report.max_error, report.t_max_error = math.inf, miscounted[0]
+        notes.append(f'{len(miscounted)} poses have a different number of parts re-simulated than recorded (the '
+                     f'first at t = {miscounted[0]:.6f} s): not compared')
     report.exact_stop_times = recording.exact
     report.transitions = stepper.state.transitions
     report.recorded_transitions = _recorded_transitions(log, round(report.sim_time * 1e9))

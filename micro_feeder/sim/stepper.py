@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
-from ..interface.names import split_window_id, window_id
+from ..interface.names import part_entity, split_window_id, window_id
 from ..physics.contact import ContactLaw, ContactParams, contact_law
-from ..physics.dynamics import EventList, FeederModel, FeederState, Observation
+from ..physics.dynamics import EventList, FeederModel, FeederState, Observation, layout
 from ..physics.particle import ParticleParams
 from ..physics.parts import PartsModel, PartsState
 from ..physics.trajectory import CommandLimits, check_table
@@ -92,6 +92,7 @@ class Stepper:
         self.parts_state = self.parts.initial_state() if self.parts is not None else \
             PartsState([self.model.initial_state()])
         self.schedule = StrokeSchedule(trajectory_table([0.0], np.zeros((1, self.model.n_actuators))))
+        self.entity_names = [part_entity(k) for k in range(self.n_parts)]
 
     @property
     def state(self) -> FeederState:
@@ -125,6 +126,54 @@ class Stepper:
         if self.parts is None:
             return [self.model.advance(parts.parts[0], t_target, schedule)]
         return self.parts.advance(parts, t_target, schedule)
+
+    def spawn_part(self, name: str, x: float) -> int:
+        """Place a part named ``name`` at ``x`` (m) now, at rest on the surface (stuck, the stacks' state as the
+        other parts have it); it takes its place in order along the feeder. Returns its index.
+
+        Raises :class:`ValueError` (nothing changed) for a name already taken, an ``x`` outside
+        ``particle.x0``'s range or within ``particle.size`` of a part's centre (parts never overlap), and on a
+        plate with ``surface.thickness`` > 0 (one part only there)."""
+        if name in self.entity_names:
+            raise ValueError(f'an entity named {name!r} exists already')
+        if not -1.0 <= x <= 1.0:
+            raise ValueError(f'x = {x!r} m: a part goes within -1 m ... 1 m of the feeder\'s origin')
+        if self.model.surface.thickness > 0.0:
+            raise ValueError('one part only with surface.thickness > 0 (parts meeting on a moving material are '
+                             'not modelled)')
+        positions = self.parts_state.positions
+        size = self.model.particle.size
+        index = int(np.searchsorted(positions, x))
+        near = [positions[i] for i in (index - 1, index) if 0 <= i < positions.size
+                and abs(positions[i] - x) < size]
+        if near:
+            raise ValueError(f'x = {x:.6g} m overlaps the part at {near[0]:.6g} m (centres at least particle.size '
+                             f'= {size:g} m apart)')
+        like = self.state
+        part = self.model.initial_state(x, 0.0)
+        part.y[4:] = like.y[4:]                     # the piezo stacks' state: the surface's, shared by every part
+        part.fs[layout.FS_T] = like.fs[layout.FS_T]
+        self.parts_state.parts.insert(index, part)
+        self.entity_names.insert(index, name)
+        self._parts_changed()
+        return index
+
+    def delete_part(self, name: str) -> int:
+        """Remove the part named ``name``; returns the index it had. Raises :class:`ValueError` (nothing changed)
+        for an unknown name and for the last part (a feeder simulates at least one)."""
+        if name not in self.entity_names:
+            raise ValueError(f'no entity named {name!r}')
+        if self.n_parts == 1:
+            raise ValueError(f'{name} is the last part: the simulator keeps at least one')
+        index = self.entity_names.index(name)
+        del self.parts_state.parts[index], self.entity_names[index]
+        self._parts_changed()
+        return index
+
+    def _parts_changed(self) -> None:
+        """After a spawn or a delete: several parts meet through :class:`PartsModel`, one alone is the model's."""
+        self.parts = PartsModel(self.model) if self.n_parts > 1 else None
+        self.parts_state.chunk_hint = 0.0
 
     def observe(self) -> Observation:
         """Part 0's outputs now (docs/dynamics.md §4)."""
