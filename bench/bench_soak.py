@@ -58,6 +58,7 @@ CLK_TCK = os.sysconf('SC_CLK_TCK')
 CASES = {1: (10.0, 25.0), 16: (10.0, 35.0), 64: (2.0, 50.0)}     # actuators: (minutes, CPU target %)
 RUN_MINUTES = 10.0                     # the run case: micro-feeder run --record, then resim of its log
 RUN_RSS_TARGET = 0.1                   # MB/min, the run process
+POSE_RATE_TARGET = 990.0               # Hz of sim time: the 1 kHz grid at the real-time target of 0.99
 RESIM_RSS_TARGET, RESIM_WALL_TARGET = 500.0, 300.0    # MB, s: resim of the run's log
 BIN = Path(sys.executable).parent
 LOG_DIR = Path(os.environ.get('SOAK_LOG_DIR', 'out/soak'))     # the nodes' logs, one file per case and node
@@ -243,6 +244,7 @@ def run_record_case(minutes: float, settings: dict[str, object] | None = None, n
         'cpu_pct': 100.0 * (s[-1, 1] - s[0, 1]) / wall, 'rss_mb_per_min': slope_per_minute(list(s[warm, 0]),
                                                                                            list(s[warm, 2])),
         'rss_mb': s[-1, 2], 'poses': stamps.size, 'max_gap_ms': float(np.max(np.diff(stamps))) * 1e-6,
+        'pose_rate_hz': (stamps.size - 1) / ((stamps[-1] - stamps[0]) * 1e-9),
         'lost': reader.recorder_info.get('lost_total', '?'),
         'received': reader.recorder_info.get('received_total', '?'),
         'underruns': diagnostics.latest.get('actuator', {}).get('stream_underruns', '?'),
@@ -261,7 +263,9 @@ def run_report(r: dict) -> str:
         f"{r['run_rtf']})   target >= 0.99  {ok(r['rtf_median'] >= 0.99)}",
         f"  RSS growth {r['rss_mb_per_min']:+.3f} MB/min ({r['rss_mb']:.0f} MB at the end)   target < "
         f"{RUN_RSS_TARGET:g} MB/min  {ok(r['rss_mb_per_min'] < RUN_RSS_TARGET)}   (CPU {r['cpu_pct']:.1f} % of a core)",
-        f"  log {r['log']}: {r['poses']:,} poses, largest stamp gap {r['max_gap_ms']:.3f} ms, lost {r['lost']} of "
+        f"  log {r['log']}: {r['poses']:,} poses ({r['pose_rate_hz']:.0f} per sim second, target >= "
+        f"{POSE_RATE_TARGET:.0f}), "
+        f"largest stamp gap {r['max_gap_ms']:.3f} ms, lost {r['lost']} of "
         f"{r['received']} received",
         f"  resim of the log: peak RSS {resim['peak_mb']:.0f} MB   target <= {RESIM_RSS_TARGET:g} MB  "
         f"{ok(resim['peak_mb'] <= RESIM_RSS_TARGET and not resim['killed'])}; wall {resim['wall_s']:.0f} s   target <= "
@@ -328,6 +332,9 @@ def run_figures(r: dict) -> list[dict]:
         figure('run_lost', 'micro-feeder run --record: messages the recorder lost', _count(r['lost']), '', op='<=',
                target=0,
                note=f'{r["poses"]:,} poses, largest stamp gap {r["max_gap_ms"]:.3f} ms'),
+        figure('run_pose_rate_hz', 'micro-feeder run --record: poses published per second of sim time',
+               round(r['pose_rate_hz'], 1), 'Hz', op='>=', target=POSE_RATE_TARGET,
+               note='a tick that comes late skips the 1 ms grid points it missed'),
         figure('run_resim_peak_mb', 'resim of that log: peak RSS', round(resim['peak_mb']), 'MB', op='<=',
                target=RESIM_RSS_TARGET, note=resim['killed'] or f'wall {resim["wall_s"]:.0f} s'),
     ]
