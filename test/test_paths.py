@@ -205,6 +205,18 @@ def _conditioning(flat: dict[str, object], duration: float, offline: tuple) -> t
     return stable, allowance
 
 
+def _convergence(flat: dict[str, object], duration: float, offline: float, stepped: float,
+                 streaming: dict[str, object]) -> float:
+    """2x how far either path's distance moves when the integration tolerances are 10x looser: on a plate
+    (``surface.thickness`` > 0) whose strokes jump in velocity, the answers themselves move by ~1e-9 m per decade
+    of tolerance near 1e-13 (a trapezoid on 4 actuators: offline -9.14154, -9.14227, -9.14299 µm at 1e-11, 1e-12,
+    1e-13; stepped -9.14479, -9.14512, -9.14140 µm), so the paths cannot agree closer than that. Found by this
+    test (the listed plate case below); the slow convergence itself is not fixed."""
+    looser = {**flat, 'integration.tolerance': 1e-12, 'integration.event_tolerance': 1e-12}
+    return 2.0 * max(abs(_offline(looser, duration)[0] - offline),
+                     abs(_stepped(looser, duration, **streaming)[0] - stepped))
+
+
 def _check_paths(scenario: dict[str, object], drawn: bool = True) -> None:
     """Every path moves the part as ``simulate`` does. A scenario whose transition counts change with a
     change of the strokes as small as the knots' error has no path's answer: a drawn one is rejected
@@ -222,6 +234,8 @@ def _check_paths(scenario: dict[str, object], drawn: bool = True) -> None:
         assert stable, ('a listed scenario on a knife\'s edge', scenario)
     stepped = _stepped(flat, duration, **streaming)
     assert stepped[1:] == offline[1:], (scenario, offline, stepped)
+    if flat.get('surface.thickness', 0.0) > 0.0 and not _same_distance(stepped[0], offline[0], allowance):
+        allowance = max(allowance, _convergence(flat, duration, offline[0], stepped[0], streaming))
     assert _same_distance(stepped[0], offline[0], allowance), (scenario, offline, stepped, allowance)
     row = sweep(flat, 'stroke.amplitude', [StrokeParams.from_flat(flat).amplitude], duration=duration)[0]
     assert row['error'] == '', (scenario, row)
@@ -315,6 +329,14 @@ FOUND_CASES = [   # found by the property below, fixed
      'surface.widths': [0.0011676552493456412, 0.001441010559542227, 0.0013252422062852997, 0.0005],
      'particle.x0': -0.0015, 'piezo.enabled': False, 'stream.max_points': 2000, 'stream.window': 0.02,
      'stroke.samples': [0.0, 0.0, 0.0, 0.0005, 0.2681199214828744, 0.68359375, 0.521484375, 0.0]},
+    # surface.thickness with a trapezoid (velocity jumps): offline and stepped differ by 1.6e-9 m, against 1.2e-9 m
+    # from the strokes' conditioning; each path's own answer moves by up to 3.7e-9 m with the tolerance (_convergence)
+    {'stroke.waveform': 'trapezoid', 'stroke.count': 3, 'stroke.pause': 0.00390625, 'stroke.delay': 0.0,
+     'stroke.duty': 0.454, 'stroke.amplitude': 1e-05, 'stroke.frequency': 2698.734609067851,
+     'stroke.phases': [0.0, 4.0314e-08, 0.484375, 0.0664655404193737],
+     'surface.centers': [-0.00113535, -0.00037845, 0.00037845, 0.00113535],
+     'surface.widths': [0.0005008200042605213, 0.0005000000000000001, 0.0012459380497229586, 0.0005858233869381344],
+     'particle.x0': 0.000750093955661381, 'piezo.enabled': False, 'surface.thickness': 6.103515625e-05},
     # surface.thickness, a part at a bump's centre barely unstuck where one stroke ends and another starts: the
     # root search refined the slide margin as dir·ẋ, not dir·Ẋ (the slip relative to the moving material), and
     # found a reversal every 66 ps without end (the run never finished)
