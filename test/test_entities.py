@@ -93,8 +93,8 @@ def test_an_entity_change_reads_back_as_written() -> None:
     changes = [EntityChange(SPAWNED, 'guest', 0, 0.0123456789012, -4.5e-4),
                EntityChange(DELETED, 'part_0', 1, 0.5, 1e-3)]
     for change in changes:
-        assert read_entity_changes(change.message('/feeder/simulator')) == [change]
-    bad = changes[0].message('/simulator')
+        assert read_entity_changes(change.message('feeder/simulator: entity')) == [change]
+    bad = changes[0].message('simulator: entity')
     bad.status[0].values = bad.status[0].values[1:]
     with pytest.raises(ValueError, match='entity'):
         read_entity_changes(bad)

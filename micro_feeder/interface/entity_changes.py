@@ -2,11 +2,11 @@
 DeleteEntity): ``simulator/entity_changes``, one ``diagnostic_msgs/DiagnosticArray`` per change, so that a log
 says when the parts' number changed and ``resim`` applies the change at the same sim time.
 
-Each change is one status named ``{source}: entity``: level OK, ``message`` = ``spawned`` or ``deleted``,
-hardware id ``micro_feeder``, key/values ``entity`` (its name), ``part`` (its index in order along the feeder,
-where it was placed or what it had), ``t_s`` (the exact sim time, repr of the float) and ``x_m`` (its position,
-m); ``header.stamp`` = the sim time rounded to the nanosecond, frame ``feeder``. Rare messages: built as rclpy
-message objects, not hand-written bytes.
+Each change is one status named ``simulator: entity`` (the node's name): level OK, ``message`` = ``spawned``
+or ``deleted``, hardware id ``micro_feeder``, key/values ``entity`` (its name), ``part`` (its index in order
+along the feeder, where it was placed or what it had), ``t_s`` (the exact sim time, repr of the float) and
+``x_m`` (its position, m); ``header.stamp`` = the sim time rounded to the nanosecond, frame ``feeder``. Rare
+messages: built as message objects, not hand-written bytes.
 """
 
 from __future__ import annotations
@@ -34,11 +34,12 @@ class EntityChange:
     t: float
     x: float
 
-    def message(self, source: str) -> DiagnosticArray:
-        """As the DiagnosticArray the simulator publishes (``source``: its node name)."""
+    def message(self, status_name: str) -> DiagnosticArray:
+        """As the DiagnosticArray the simulator publishes, its status named ``status_name``
+        (``simulator: entity``, the node's name first)."""
         values = [KeyValue(key='entity', value=self.entity), KeyValue(key='part', value=str(self.part)),
                   KeyValue(key='t_s', value=repr(self.t)), KeyValue(key='x_m', value=repr(self.x))]
-        status = DiagnosticStatus(level=DiagnosticStatus.OK, name=f'{source}: entity', message=self.kind,
+        status = DiagnosticStatus(level=DiagnosticStatus.OK, name=status_name, message=self.kind,
                                   hardware_id='micro_feeder', values=values)
         return DiagnosticArray(header=Header(stamp=to_time(self.t), frame_id=FEEDER_FRAME), status=[status])
 

@@ -670,7 +670,8 @@ class Simulator(Node):
         return self._change_parts(SPAWNED, name, lambda: self._stepper.spawn_part(name, x))
 
     def delete_part(self, name: str) -> tuple[bool, str]:
-        """DeleteEntity: the part named ``name`` removed now (:meth:`Stepper.delete_part`), recorded as a spawn."""
+        """DeleteEntity: the part named ``name`` removed now (:meth:`Stepper.delete_part`), recorded as
+        :meth:`spawn_part`'s."""
         return self._change_parts(DELETED, name, lambda: self._stepper.delete_part(name))
 
     def _change_parts(self, kind: str, name: str, change: Callable[[], int]) -> tuple[bool, str]:
@@ -684,7 +685,7 @@ class Simulator(Node):
             x = before[name] if kind == DELETED else stepper.parts_state.parts[index].x
             change_record = EntityChange(kind, name, index, stepper.t, x)
             self._parts_messages = PartsMessages(stepper.n_parts)
-            self._pub_entity_changes.publish(change_record.message(self.get_fully_qualified_name()))
+            self._pub_entity_changes.publish(change_record.message(status_name(self, 'entity')))
         message = f'{name} {kind} at x = {x * 1e3:.6g} mm, t = {change_record.t:.9f} s: {stepper.n_parts} parts'
         self.get_logger().info(message)
         return True, message
