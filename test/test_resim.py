@@ -4,6 +4,7 @@ with trajectory and set-point commands (stamp 0, a future stamp, a refused one).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -60,9 +61,11 @@ def _hold(stamp_s: float, stroke: float) -> object:
     return msg
 
 
-def _record_stepped_run(context: Context, path: Path) -> dict[str, int]:
-    """Simulator paused, recorder and a probe in one executor; commands between steps. Returns what the
-    recorder received per topic."""
+@contextlib.contextmanager
+def _stepped_nodes(context: Context, path: Path
+                   ) -> Iterator[tuple[Recorder, Simulator, Probe, SingleThreadedExecutor]]:
+    """A paused simulator stepping ``STEP``, a recorder writing ``path`` and a probe, in one executor; all shut
+    down and destroyed on exit."""
     recorder = Recorder(context=context, parameter_overrides=[Parameter('output', value=str(path)),
                                                               Parameter('flush_period', value=0.2)])
     sim = Simulator(context=context, overrides={'start_paused': True, 'step_period': STEP})
@@ -70,16 +73,27 @@ def _record_stepped_run(context: Context, path: Path) -> dict[str, int]:
     executor = SingleThreadedExecutor(context=context)
     for node in (recorder, sim, probe):
         executor.add_node(node)
-
-    def wait(predicate, what: str) -> None:
-        wait_until(predicate, TIMEOUT, executor=executor, what=what)
-
-    def send(topic: str, msg: object) -> None:
-        count = recorder.received['/simulator/command_receipts']
-        probe.publishers_[topic].publish(msg)
-        wait(lambda: recorder.received['/simulator/command_receipts'] == count + 1, f'receipt of {topic}')
-
     try:
+        yield recorder, sim, probe, executor
+    finally:
+        executor.shutdown()
+        recorder.close()
+        for node in (probe, sim, recorder):
+            node.destroy_node()
+
+
+def _record_stepped_run(context: Context, path: Path) -> dict[str, int]:
+    """Simulator paused, recorder and a probe in one executor; commands between steps. Returns what the
+    recorder received per topic."""
+    with _stepped_nodes(context, path) as (recorder, sim, probe, executor):
+        def wait(predicate, what: str) -> None:
+            wait_until(predicate, TIMEOUT, executor=executor, what=what)
+
+        def send(topic: str, msg: object) -> None:
+            count = recorder.received['/simulator/command_receipts']
+            probe.publishers_[topic].publish(msg)
+            wait(lambda: recorder.received['/simulator/command_receipts'] == count + 1, f'receipt of {topic}')
+
         wait(lambda: all(pub.get_subscription_count() == 3 for pub in probe.publishers_.values())  # +probe's own
              and sim.count_subscribers('particle/pose') == 2
              and sim.count_subscribers('simulator/command_receipts') == 2
@@ -99,11 +113,6 @@ def _record_stepped_run(context: Context, path: Path) -> dict[str, int]:
         assert sim.rejected == 2, sim.last_rejection
         wait(lambda: recorder.received['/particle/pose'] == at_start + STEPS, 'every pose recorded')
         received = {topic: n for topic, n in recorder.received.items()}
-    finally:
-        executor.shutdown()
-        recorder.close()
-        for node in (probe, sim, recorder):
-            node.destroy_node()
     return received
 
 
@@ -136,55 +145,46 @@ def test_stepped_log_resimulates_bit_for_bit(stepped_log: Path) -> None:
 def _record_goal_driven_run(context: Context, path: Path) -> dict[str, int]:
     """A stepped run driven only by FollowJointTrajectory goals: one replaced by the next, one stamped ahead,
     one refused, one canceled (the simulator holds the strokes). Returns the goals' error codes by name."""
-    recorder = Recorder(context=context, parameter_overrides=[Parameter('output', value=str(path)),
-                                                              Parameter('flush_period', value=0.2)])
-    sim = Simulator(context=context, overrides={'start_paused': True, 'step_period': STEP})
-    probe = Probe(context=context)
-    client = ActionClient(probe, FollowJointTrajectory, 'simulator/follow_joint_trajectory')
-    executor = SingleThreadedExecutor(context=context)
-    for node in (recorder, sim, probe):
-        executor.add_node(node)
+    with _stepped_nodes(context, path) as (recorder, sim, probe, executor):
+        client = ActionClient(probe, FollowJointTrajectory, 'simulator/follow_joint_trajectory')
 
-    def wait(predicate, what: str) -> None:
-        wait_until(predicate, TIMEOUT, executor=executor, what=what)
+        def wait(predicate, what: str) -> None:
+            wait_until(predicate, TIMEOUT, executor=executor, what=what)
 
-    def send(trajectory: object) -> tuple[Any, Any]:
-        """The goal's handle and its result's future, once the simulator has received it."""
-        count = recorder.received['/simulator/command_receipts']
-        future = client.send_goal_async(FollowJointTrajectory.Goal(trajectory=trajectory))
-        wait(future.done, 'goal answered')
-        wait(lambda: recorder.received['/simulator/command_receipts'] == count + 1, 'receipt of the goal')
-        return future.result(), future.result().get_result_async()
+        def send(trajectory: object) -> tuple[Any, Any]:
+            """The goal's handle and its result's future, once the simulator has received it."""
+            count = recorder.received['/simulator/command_receipts']
+            future = client.send_goal_async(FollowJointTrajectory.Goal(trajectory=trajectory))
+            wait(future.done, 'goal answered')
+            wait(lambda: recorder.received['/simulator/command_receipts'] == count + 1, 'receipt of the goal')
+            return future.result(), future.result().get_result_async()
 
-    codes: dict[str, int] = {}
-    try:
-        wait(lambda: client.server_is_ready() and sim.count_subscribers('particle/pose') == 2
-             and sim.count_subscribers('simulator/trajectories_received') == 2
-             and sim.count_subscribers('simulator/command_receipts') == 2
-             and recorder.received['/simulator/parameters'] == 1, 'recorder, probe and action client matched')
-        at_start = recorder.received['/particle/pose']
-        _, replaced = send(_burst(0.0))                    # 4 ms of strokes
-        probe.step(executor, 30)
-        _, ahead = send(_hold(0.0093, 30e-6))              # replaces the burst at 3 ms; runs from t = 9.3 ms
-        probe.step(executor, 90)
-        _, refused = send(_hold(0.0, 1.0))                 # outside the piezo travel
-        running, canceled = send(_burst(0.0))
-        probe.step(executor, 30)
-        count = recorder.received['/simulator/command_receipts']
-        cancel = running.cancel_goal_async()
-        wait(lambda: cancel.done() and canceled.done(), 'goal canceled')
-        wait(lambda: recorder.received['/simulator/command_receipts'] == count + 1, 'receipt of the hold')
-        probe.step(executor, 50)
-        for name, future in (('replaced', replaced), ('ahead', ahead), ('refused', refused), ('canceled', canceled)):
-            wait(future.done, f'result of the {name} goal')
-            codes[name] = future.result().status
-        wait(lambda: recorder.received['/particle/pose'] == at_start + 200, 'every pose recorded')
-    finally:
-        executor.shutdown()
-        recorder.close()
-        client.destroy()
-        for node in (probe, sim, recorder):
-            node.destroy_node()
+        codes: dict[str, int] = {}
+        try:
+            wait(lambda: client.server_is_ready() and sim.count_subscribers('particle/pose') == 2
+                 and sim.count_subscribers('simulator/trajectories_received') == 2
+                 and sim.count_subscribers('simulator/command_receipts') == 2
+                 and recorder.received['/simulator/parameters'] == 1, 'recorder, probe and action client matched')
+            at_start = recorder.received['/particle/pose']
+            _, replaced = send(_burst(0.0))                    # 4 ms of strokes
+            probe.step(executor, 30)
+            _, ahead = send(_hold(0.0093, 30e-6))              # replaces the burst at 3 ms; runs from t = 9.3 ms
+            probe.step(executor, 90)
+            _, refused = send(_hold(0.0, 1.0))                 # outside the piezo travel
+            running, canceled = send(_burst(0.0))
+            probe.step(executor, 30)
+            count = recorder.received['/simulator/command_receipts']
+            cancel = running.cancel_goal_async()
+            wait(lambda: cancel.done() and canceled.done(), 'goal canceled')
+            wait(lambda: recorder.received['/simulator/command_receipts'] == count + 1, 'receipt of the hold')
+            probe.step(executor, 50)
+            for name, future in (('replaced', replaced), ('ahead', ahead), ('refused', refused),
+                                 ('canceled', canceled)):
+                wait(future.done, f'result of the {name} goal')
+                codes[name] = future.result().status
+            wait(lambda: recorder.received['/particle/pose'] == at_start + 200, 'every pose recorded')
+        finally:
+            client.destroy()
     return codes
 
 
@@ -386,14 +386,7 @@ def test_parts_spawned_and_deleted_resimulate_bit_for_bit(tmp_path: Path) -> Non
     rclpy.init(context=context)
     path = tmp_path / 'spawned'
     try:
-        recorder = Recorder(context=context, parameter_overrides=[Parameter('output', value=str(path)),
-                                                                  Parameter('flush_period', value=0.2)])
-        sim = Simulator(context=context, overrides={'start_paused': True, 'step_period': STEP})
-        probe = Probe(context=context)
-        executor = SingleThreadedExecutor(context=context)
-        for node in (recorder, sim, probe):
-            executor.add_node(node)
-        try:
+        with _stepped_nodes(context, path) as (recorder, sim, probe, executor):
             wait_until(lambda: sim.count_subscribers('simulator/entity_changes') == 2
                        and sim.count_subscribers('particles/poses') == 2
                        and recorder.received['/simulator/parameters'] == 1, TIMEOUT, executor=executor,
@@ -412,11 +405,6 @@ def test_parts_spawned_and_deleted_resimulate_bit_for_bit(tmp_path: Path) -> Non
             wait_until(lambda: recorder.received['/particle/pose'] == at_start + 140
                        and recorder.received['/simulator/entity_changes'] == 3, TIMEOUT, executor=executor,
                        what='every pose and change recorded')
-        finally:
-            executor.shutdown()
-            recorder.close()
-            for node in (probe, sim, recorder):
-                node.destroy_node()
     finally:
         rclpy.shutdown(context=context)
     log = LogReader(path)
