@@ -98,3 +98,18 @@ def test_an_entity_change_reads_back_as_written() -> None:
     bad.status[0].values = bad.status[0].values[1:]
     with pytest.raises(ValueError, match='entity'):
         read_entity_changes(bad)
+
+
+def test_the_plot_of_a_log_follows_each_part_by_its_name_through_spawns_and_deletes() -> None:
+    from micro_feeder.cli.plot import _follow_parts
+    # rows (x, mode) at t = 0, 1, 2, 3: part_0 at 5; 'b' spawned at 1 in front (x 9); 'a' spawned at 2 behind
+    # (x 1); part_0 deleted at 3 (the changes show from the next row: the pose at t was published first)
+    rows = [np.array([[5.0, 0]]), np.array([[5.0, 0], [9.0, 0]]), np.array([[1.0, 0], [5.0, 0], [9.0, 0]]),
+            np.array([[1.0, 0], [9.0, 0]])]
+    changes = [EntityChange(SPAWNED, 'b', 1, 0.5, 9.0), EntityChange(SPAWNED, 'a', 0, 1.5, 1.0),
+               EntityChange(DELETED, 'part_0', 1, 2.5, 5.0)]
+    names, table = _follow_parts([0.0, 1.0, 2.0, 3.0], rows, changes)
+    assert names == ['part_0', 'b', 'a']
+    x = table[:, :, 0]
+    assert np.array_equal(x, np.array([[5, np.nan, np.nan], [5, 9, np.nan], [5, 9, 1], [np.nan, 9, 1]]),
+                          equal_nan=True)

@@ -413,3 +413,7 @@ def test_parts_spawned_and_deleted_resimulate_bit_for_bit(tmp_path: Path) -> Non
     report = resimulate(log)
     assert report.identical and report.max_error == 0.0, report.verdict()
     assert any('3 parts spawned or deleted' in note for note in report.notes), report.notes
+    text = format_summary(summarize(log))          # info: the changes, and no distance by part index
+    assert '2 spawned, 1 deleted during the run' in text and 'moved' not in text.split('parts      ')[-1], text
+    assert cli_main(['plot', str(path), '-o', str(tmp_path / 'run.png')]) == 0
+    assert (tmp_path / 'run_parts.png').stat().st_size > 0

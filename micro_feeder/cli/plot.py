@@ -56,34 +56,55 @@ def _plot_parts(log, args: argparse.Namespace):
     if not rows or max(table.shape[0] for _, table in rows) < 2:
         return None
     fields = rows[0][0]
-    same = [table for labels, table in rows if labels == fields]
-    changed = len({table.shape for table in same}) > 1
-    tables = _stack_parts(same)
-    t = tables[:, 0, fields.index('t')]
-    t = np.where(np.isnan(t), np.roll(t, -1), t)       # a row between two numbers of parts: the next row's time
+    times, tables = zip(*[(table[0, fields.index('t')], table) for labels, table in rows if labels == fields],
+                        strict=True)
+    names, tables = _follow_parts(list(times), list(tables), _entity_changes(log))
+    t = np.asarray(times)
     keep = ((args.start is None) | (t >= (args.start or 0.0))) & ((args.end is None) | (t <= (args.end or np.inf)))
     output = Path(args.output)
     path = output.with_name(f'{output.stem}_parts{output.suffix or ".png"}')
     try:
         return plot_positions(t[keep], tables[keep, :, fields.index('x')], tables[keep, :, fields.index('mode')],
                               path, f'{tables.shape[1]} parts of {log.path.name}: position against time '
-                              '(impacts are not recorded)' + (' - parts spawned or deleted: a line ends where the '
-                                                              'parts changed' if changed else ''))
+                              '(impacts are not recorded)', names=names)
     except OSError as err:
         raise CommandError(f'cannot write {path}: {err}') from None
 
 
-def _stack_parts(tables: list):
-    """(rows, parts, fields) of per-message (parts, fields) tables whose number of parts changes (parts spawned
-    or deleted): padded with NaN to the most parts, and a NaN row where the number changes, so that no line joins
-    a part before the change to another after it."""
+def _entity_changes(log) -> list:
+    """The parts spawned and deleted during the run (``simulator/entity_changes``), in time order."""
+    from ..interface.entity_changes import read_entity_changes
+    from ..interface.topics import ENTITY_CHANGES
+
+    if log.resolve(ENTITY_CHANGES) is None:
+        return []
+    return sorted((change for m in log.messages([ENTITY_CHANGES], decoded=True)
+                   for change in read_entity_changes(m.message)), key=lambda change: change.t)
+
+
+def _follow_parts(times: list, tables: list, changes: list):
+    """(entity names, (rows, parts, fields) array): each part in its own column through spawns and deletes,
+    NaN where it is not there. Row k holds the parts in order along the feeder at ``times[k]``; a change made
+    at sim time t shows from the first row after t (the simulator publishes before it changes the parts)."""
     import numpy as np
 
-    most = max(table.shape[0] for table in tables)
-    out, last = [], tables[0].shape[0]
-    for table in tables:
-        if table.shape[0] != last:
-            out.append(np.full((most, table.shape[1]), np.nan))
-            last = table.shape[0]
-        out.append(np.vstack([table, np.full((most - table.shape[0], table.shape[1]), np.nan)]))
-    return np.stack(out)
+    from ..interface.names import part_entity
+
+    present = [part_entity(k) for k in range(tables[0].shape[0])]
+    names = list(present)
+    rows, pending = [], list(changes)
+    for t, table in zip(times, tables, strict=True):
+        while pending and pending[0].t < t:
+            change = pending.pop(0)
+            if change.kind == 'spawned':
+                present.insert(min(change.part, len(present)), change.entity)
+                if change.entity not in names:
+                    names.append(change.entity)
+            elif change.entity in present:
+                present.remove(change.entity)
+        row = np.full((len(names), table.shape[1]), np.nan)
+        if len(present) == table.shape[0]:             # else the record and the poses disagree: the row is left out
+            row[[names.index(name) for name in present]] = table
+        rows.append(row)
+    width = len(names)
+    return names, np.stack([np.vstack([row, np.full((width - row.shape[0], row.shape[1]), np.nan)]) for row in rows])

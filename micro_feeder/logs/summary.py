@@ -15,7 +15,7 @@ import datetime
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..interface.entity_changes import read_entity_changes
+from ..interface.entity_changes import SPAWNED, read_entity_changes
 from ..interface.topics import COMMAND_TOPICS, ENTITY_CHANGES
 from ..physics.dynamics import MODES
 from .coverage import Coverage, end_line, missing_command_lines, stall_lines
@@ -228,9 +228,10 @@ def _parts(log: LogReader) -> list[PartState]:
         if 'mode' in fields:
             codes = states.message.data[fields.index('mode')::width]
             modes = [MODES[int(c)] if 0 <= int(c) < len(MODES) else None for c in codes][:len(modes)]
+    first_x: list[float | None] = [p.position.x for p in first.message.poses]
+    first_x += [None] * (len(modes) - len(first_x))         # more parts at the end than at the start: spawned
     return [PartState((last.stamp_ns or 0) * 1e-9, q.position.x, q.position.z, mode, (first.stamp_ns or 0) * 1e-9,
-                      p.position.x)
-            for q, p, mode in zip(last.message.poses, first.message.poses, modes, strict=False)]
+                      x0) for q, mode, x0 in zip(last.message.poses, modes, first_x, strict=False)]
 
 
 def _size(n: int) -> str:
@@ -315,7 +316,8 @@ def format_summary(s: LogSummary, coverage: Coverage | None = None) -> str:
         if p.x is not None and p.first_x is not None:
             lines.append(f'           moved {(p.x - p.first_x) * 1e6:+.3f} µm since t = {p.first_stamp:.4f} s')
     if s.entity_changes:
-        lines.append('parts      ' + ', '.join(f'{n} {kind}' for kind, n in sorted(s.entity_changes.items()))
+        lines.append('parts      ' + ', '.join(f'{n} {kind}' for kind, n in sorted(s.entity_changes.items(),
+                                                                                 key=lambda item: item[0] != SPAWNED))
                      + ' during the run (simulator/entity_changes): distances by part index not shown')
     if s.parts:
         lines.append(f'parts      {len(s.parts)} (particles/poses) at t = {s.parts[0].stamp:.4f} s:')

@@ -29,7 +29,7 @@ def plot_space_time(result: PartsResult, path: Path | str, title: str = '', gate
 
 def plot_positions(times: np.ndarray, x: np.ndarray, modes: np.ndarray, path: Path | str, title: str = '',
                    gate: float | None = None, size: float | None = None,
-                   impacts: list[tuple[float, float]] | None = None) -> Path:
+                   impacts: list[tuple[float, float]] | None = None, names: list[str] | None = None) -> Path:
     """:func:`plot_space_time` from arrays: ``times`` (s, n), ``x`` (m, n × parts), ``modes`` (n × parts, codes
     of MODES); ``impacts`` as (t s, x m), none marked when None (a log does not record them)."""
     result_x, result_modes = x, modes
@@ -43,7 +43,8 @@ def plot_positions(times: np.ndarray, x: np.ndarray, modes: np.ndarray, path: Pa
         x = result_x[:, k] * MM
         if size is not None:
             ax.fill_between(t, x - 0.5 * size * MM, x + 0.5 * size * MM, color=color, alpha=0.18, lw=0)
-        ax.plot(t, x, color=color, lw=0.8, label=f'part {k}' if n <= 10 else None)
+        label = (names[k] if names else f'part {k}') if n <= 10 else None
+        ax.plot(t, x, color=color, lw=0.8, label=label)
         for mode, style in ((1, dict(lw=2.2, ls='-')), (2, dict(lw=1.4, ls=':'))):
             ax.plot(t, np.where(result_modes[:, k] == mode, x, np.nan), color=color, **style)
     if impacts:
