@@ -104,6 +104,8 @@ class ControlledSimulator(Protocol):
 
     def observe_entities(self) -> tuple[list[str], list[Observation]]: ...
 
+    def entity_names(self) -> list[str]: ...
+
     def spawn_part(self, name: str, x: float) -> tuple[bool, str]: ...
 
     def delete_part(self, name: str) -> tuple[bool, str]: ...
@@ -314,7 +316,9 @@ class SimulationControl:
         if code == Result.RESULT_OK:
             try:
                 ok, message = self._sim.spawn_part(name, request.initial_pose.pose.position.x)
-                code = Result.RESULT_OK if ok else SpawnEntity.Response.INVALID_POSE
+                # refused by the simulator: where it goes, or (another spawn came first) its name
+                code = Result.RESULT_OK if ok else SpawnEntity.Response.NAME_NOT_UNIQUE if name in \
+                    self._sim.entity_names() else SpawnEntity.Response.INVALID_POSE
             except Busy as err:
                 code, message = Result.RESULT_OPERATION_FAILED, str(err)
         response.result = result(code, message)
@@ -340,7 +344,7 @@ class SimulationControl:
         if not math.isfinite(x):
             return SpawnEntity.Response.INVALID_POSE, f'position.x = {x}: not a number', ''
         try:
-            names, _ = self._observe()
+            names = self._sim.entity_names()
         except Busy as err:
             return Result.RESULT_OPERATION_FAILED, str(err), ''
         name = request.name
@@ -357,8 +361,7 @@ class SimulationControl:
 
     def _on_delete(self, request: DeleteEntity.Request, response: DeleteEntity.Response) -> DeleteEntity.Response:
         try:
-            names, _ = self._observe()
-            if request.entity not in names:
+            if request.entity not in self._sim.entity_names():
                 response.result = result(Result.RESULT_NOT_FOUND, f'no entity {request.entity!r}')
                 return response
             ok, message = self._sim.delete_part(request.entity)

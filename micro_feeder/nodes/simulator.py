@@ -659,6 +659,11 @@ class Simulator(Node):
         with self._locked(self._lock):
             return self._stepper.observe_parts()
 
+    def entity_names(self) -> list[str]:
+        """Every part's entity name now, in part order."""
+        with self._locked(self._lock):
+            return list(self._stepper.entity_names)
+
     def observe_entities(self) -> tuple[list[str], list[Observation]]:
         """Every part's entity name and state now, in part order."""
         with self._locked(self._lock):
