@@ -305,7 +305,6 @@ class LogRecording:
             if ns < last:
                 return
             last = ns
-            self._counts['entity_changes'] = self._counts.get('entity_changes', 0) + 1
             yield Command(ns, ENTITY_CHANGES, m)
 
     # -- reading --------------------------------------------------------------------------------------
