@@ -9,7 +9,10 @@ import time
 import numpy as np
 import pytest
 from builtin_interfaces.msg import Duration
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from rclpy.serialization import deserialize_message, serialize_message
+from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 
 from micro_feeder.interface import messages, stamps, trajectory_cdr
@@ -84,3 +87,65 @@ def test_a_million_points_are_refused_without_reading_them() -> None:
     with pytest.raises(CommandRejected, match='1000000 points, more than'):
         parse_trajectory_cdr(data, ['piezo_0'], LIMITS)
     assert time.perf_counter() - start < 0.1
+
+
+@st.composite
+def trajectories(draw) -> JointTrajectory:
+    """JointTrajectories as any sender may write them: the joints in any order (sometimes a wrong name),
+    each point with positions, velocities, accelerations and efforts of n, 0 or another number of values
+    (mostly the same fields on every point), times mostly increasing, values mostly within the limits."""
+    n = draw(st.integers(1, 4))
+    names = draw(st.permutations([f'piezo_{i}' for i in range(n)]))
+    if draw(st.integers(0, 9)) == 0:
+        names[0] = 'elbow'
+    n_points = draw(st.integers(0, 6))
+    usual = draw(st.sampled_from([(n, n, n, 0), (n, n, 0, 0), (n, 0, 0, 0), (n, 0, n, 0), (n, n, n, n)]))
+    values = st.floats(-1.5e-4, 1.5e-4) if draw(st.booleans()) else st.floats(allow_nan=True)
+    points, t = [], draw(st.integers(0, 10**9))
+    for _ in range(n_points):
+        lengths = usual if draw(st.integers(0, 7)) else draw(st.tuples(*[st.sampled_from([0, n, n + 1])] * 4))
+        arrays = [draw(st.lists(values, min_size=k, max_size=k)) for k in lengths]
+        t += draw(st.integers(-10, 3 * 10**9))
+        points.append(JointTrajectoryPoint(positions=arrays[0], velocities=arrays[1], accelerations=arrays[2],
+                                           effort=arrays[3], time_from_start=Duration(sec=t // 10**9,
+                                                                                      nanosec=t % 10**9)))
+    return JointTrajectory(header=Header(stamp=stamps.to_time(draw(st.floats(0, 100))), frame_id='a#1'),
+                           joint_names=names, points=points)
+
+
+def _outcome(parse, *args):
+    try:
+        return parse(*args)
+    except CommandRejected as err:
+        return str(err)
+
+
+@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(trajectories())
+def test_every_layout_parses_from_bytes_as_from_the_message(msg: JointTrajectory) -> None:
+    """Whatever fields the points carry, reading the bytes gives the command (or the refusal) rclpy's
+    deserialization followed by parse_trajectory gives."""
+    joints = [f'piezo_{i}' for i in range(len(msg.joint_names))]
+    from_bytes = _outcome(parse_trajectory_cdr, serialize_message(msg), joints, LIMITS)
+    reference = _outcome(parse_trajectory, msg, joints, LIMITS)
+    if isinstance(reference, str):
+        assert from_bytes == reference
+    else:
+        assert not isinstance(from_bytes, str), from_bytes
+        _same(from_bytes, reference)
+        assert from_bytes.command_id == reference.command_id
+
+
+@pytest.mark.parametrize('fields', [(True, True, True), (True, True, False), (True, False, False)])
+def test_the_usual_layouts_are_read_without_rclpy(fields: tuple[bool, bool, bool]) -> None:
+    """Positions with velocities and accelerations (the actuator), with velocities, or alone: read from the
+    bytes (the flood of a controller sending positions and velocities costs no rclpy deserialization)."""
+    offsets, pos, vel, acc = _knots(5, 3)
+    msg = JointTrajectory(joint_names=['piezo_0', 'piezo_1', 'piezo_2'], points=[JointTrajectoryPoint(
+        positions=list(p), velocities=list(v) if fields[1] else [], accelerations=list(a) if fields[2] else [],
+        time_from_start=Duration(sec=int(t) // 10**9, nanosec=int(t) % 10**9))
+        for t, p, v, a in zip(offsets, pos, vel, acc, strict=True)])
+    decoded = trajectory_cdr.decode(serialize_message(msg), 100)
+    assert decoded is not None and decoded.records is not None
+    assert sorted(decoded.records) == sorted(['sec', 'nanosec'] + [f for f, has in zip(
+        ('pos', 'vel', 'acc'), fields, strict=True) if has])

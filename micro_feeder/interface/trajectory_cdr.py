@@ -6,12 +6,15 @@ wire, though, a trajectory whose points all carry the same arrays is a run of fi
 aligns each field relative to the payload start (after the 4-byte encapsulation header), and with
 positions, velocities and accelerations of n joints, no effort, a point is 24n + 32 bytes and every point
 after the first starts 4 bytes past an 8-byte boundary (the first may need 4 bytes of padding before its
-doubles). :func:`encode` writes such records; :func:`decode` reads them as a numpy structured array, and
-says None for any other layout (the caller then deserializes with rclpy).
+doubles). :func:`encode` writes such records; :func:`decode` reads them, and those of points that carry
+positions with or without velocities and accelerations (what other senders write: positions and
+velocities, or positions alone), as numpy arrays, and says None for any other layout (the caller then
+deserializes with rclpy).
 """
 
 from __future__ import annotations
 
+import functools
 import struct
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -60,9 +63,9 @@ def encode(names: Sequence[str], offsets_ns: np.ndarray, positions: np.ndarray, 
 
 @dataclass(frozen=True)
 class Decoded:
-    """A JointTrajectory read from CDR: stamp (s), joint names, point count; ``records`` (read-only structured
-    array of :func:`_record`, often a view of the message's bytes) when the points have the fixed layout,
-    else None."""
+    """A JointTrajectory read from CDR: stamp (s), joint names, point count; ``records`` (the points' columns,
+    read-only, often views of the message's bytes: ``sec``, ``nanosec``, and those of ``pos``, ``vel``, ``acc``
+    the points carry) when they have a layout :func:`decode` reads, else None."""
 
     stamp: float
     names: list[str]
@@ -73,7 +76,8 @@ class Decoded:
 
 def decode(data: bytes, max_points: int) -> Decoded | None:
     """Read a serialized JointTrajectory; None when it is not little-endian CDR or is cut short. The
-    points are read only when there are at most ``max_points`` of them and they have the fixed layout."""
+    points are read only when there are at most ``max_points`` of them and they carry the same fields
+    (:func:`_read_points`)."""
     if len(data) < 16 or data[:2] != ENCAPSULATION[:2]:
         return None
     body = memoryview(data)[4:]
@@ -98,22 +102,72 @@ def decode(data: bytes, max_points: int) -> Decoded | None:
     except (struct.error, UnicodeDecodeError):
         return None
     stamp = sec + nanosec * 1e-9
-    if n_points == 0 or n_points > max_points or p + 4 > len(body):
+    if n_points == 0 or n_points > max_points:
         return Decoded(stamp, names, n_points, None, frame_id)
-    (n,) = struct.unpack_from('<I', body, p)
-    dtype = _record(n)
-    pad = 4 if p % 8 == 0 else 0
-    end = p + pad + n_points * dtype.itemsize
-    if n == 0 or not 0 <= len(body) - end < 8:         # rclpy pads the payload's end
-        return Decoded(stamp, names, n_points, None, frame_id)
-    if pad:                       # the first point is split by the padding: join it, then the rest as they are
-        records = np.empty(n_points, dtype=dtype)
-        records[:1] = np.frombuffer(bytes(body[p:p + 4]) + bytes(body[p + 4 + pad:p + pad + dtype.itemsize]),
-                                    dtype=dtype)
-        records[1:] = np.frombuffer(body[p + pad + dtype.itemsize:end], dtype=dtype)
-    else:                         # a view of the message's bytes, not a copy
-        records = np.frombuffer(body[p:end], dtype=dtype)
-    records.flags.writeable = False   # read-only either way, whatever the names' lengths made the padding
-    fixed = (np.all(records['n_pos'] == n) and np.all(records['n_vel'] == n) and np.all(records['n_acc'] == n)
-             and not np.any(records['n_effort']))
-    return Decoded(stamp, names, n_points, records if fixed else None, frame_id)
+    try:
+        records = _read_points(body, p, n_points)
+    except struct.error:
+        records = None
+    return Decoded(stamp, names, n_points, records, frame_id)
+
+
+KNOT_FIELDS = ('pos', 'vel', 'acc')     # a point's positions, velocities, accelerations, in CDR order
+
+
+@functools.lru_cache(maxsize=256)
+def _point_layout(start: int, n: int, present: tuple[bool, ...]) -> np.dtype:
+    """The dtype of one point that starts at payload offset ``start`` modulo 8 (0 or 4) with ``n``-joint
+    arrays of the :data:`KNOT_FIELDS` ``present`` (the others empty), no effort: doubles are aligned to 8
+    bytes relative to the payload, so the padding depends on where the point starts."""
+    names, formats, offsets, p = [], [], [], start
+    for field, has in zip(KNOT_FIELDS, present, strict=True):
+        names.append('n_' + field), formats.append('<u4'), offsets.append(p - start)
+        p += 4
+        if has:
+            p += -p % 8
+            names.append(field), formats.append(('<f8', (n,))), offsets.append(p - start)
+            p += 8 * n
+    for field, fmt in (('n_effort', '<u4'), ('sec', '<i4'), ('nanosec', '<u4')):
+        names.append(field), formats.append(fmt), offsets.append(p - start)
+        p += 4
+    return np.dtype({'names': names, 'formats': formats, 'offsets': offsets, 'itemsize': p - start})
+
+
+def _read_points(body: memoryview, p: int, n_points: int) -> dict[str, np.ndarray] | None:
+    """The points at ``p`` as columns (``sec``, ``nanosec``, and ``pos``, ``vel``, ``acc`` (points × joints)
+    for the fields they carry), when every point has positions of the same n > 0 joints, each other field
+    either n values on every point or none, and no effort; else None. Read from the bytes with numpy: the
+    first one or two points on their own (their padding depends on where they start), the rest as one
+    run of identical records."""
+    n = struct.unpack_from('<I', body, p)[0]
+    q, present = p, []
+    for _field in KNOT_FIELDS:                      # the first point says which fields the points carry
+        (count,) = struct.unpack_from('<I', body, q)
+        q += 4
+        if count not in (0, n):
+            return None
+        present.append(count == n)
+        if count:
+            q += -q % 8 + 8 * count
+    if n == 0 or not present[0]:
+        return None
+    chunks, left = [], n_points
+    while left:
+        dtype = _point_layout(p % 8, n, tuple(present))
+        run = left if dtype.itemsize % 8 == 0 else 1    # from here on every point starts alike
+        end = p + run * dtype.itemsize
+        if end > len(body):     # bytes after the points are left alone: rclpy's serialize_message leaves
+            return None         # spare bytes at the end (tens), every point's counts are checked instead
+        chunks.append(np.frombuffer(body[p:end], dtype=dtype))
+        p, left = end, left - run
+
+    def column(name: str) -> np.ndarray:
+        return np.concatenate([c[name] for c in chunks]) if len(chunks) > 1 else chunks[0][name]
+
+    for field, has in zip(KNOT_FIELDS, present, strict=True):
+        if np.any(column('n_' + field) != (n if has else 0)):
+            return None
+    if np.any(column('n_effort')):
+        return None
+    return {name: column(name) for name in ('sec', 'nanosec', *(f for f, has in zip(KNOT_FIELDS, present,
+                                                                                    strict=True) if has))}

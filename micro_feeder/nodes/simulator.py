@@ -50,6 +50,7 @@ from trajectory_msgs.msg import JointTrajectory
 from visualization_msgs.msg import MarkerArray
 
 from ..interface import messages, stamps, wire
+from ..interface.cdr import read_float64_array
 from ..interface.entity_changes import DELETED, SPAWNED, EntityChange
 from ..interface.names import joint_names, receipt_frame
 from ..interface.parts_messages import PartsMessages
@@ -103,9 +104,6 @@ STOP_TIMEOUT = 0.3     # s destroy_node waits for each of the loop and intake th
 COMMAND_QUEUE = 1000   # commands the subscription holds while the executor is busy (a flood waits, not lost)
 COMMAND_TYPES = {'actuator/trajectory': JointTrajectory, 'actuator/command': Float64MultiArray}
 
-# A trajectory larger than this (a window of ~100 knots) is read from its bytes with numpy; smaller ones are
-# deserialized by rclpy, cheaper for a few knots (a command storm of small trajectories)
-CDR_PARSE_BYTES = 8192
 
 
 TWIN_WATCH_DEPTH = 10    # events of ~/parameters kept for the twin check (own ones included)
@@ -473,15 +471,15 @@ class Simulator(Node):
         """A checked command for the current model, or ValueError with the reason (no lock needed)."""
         stepper = self._stepper
         joints = joint_names(stepper.model.n_actuators)
-        if received.topic == 'actuator/trajectory' and len(received.data) > CDR_PARSE_BYTES:
+        if received.topic == 'actuator/trajectory':     # read from its bytes (rclpy's for odd layouts)
             return received.topic, parse_trajectory_cdr(received.data, joints, stepper.limits)
-        try:
-            msg = wire.deserialize(received.data, COMMAND_TYPES[received.topic])
-        except Exception as err:  # rclpy raises several types for malformed bytes
-            raise ValueError(f'{received.topic}: cannot deserialize: {err}') from err
-        if received.topic == 'actuator/trajectory':
-            return received.topic, parse_trajectory(msg, joints, stepper.limits)
-        return received.topic, parse_setpoints(msg.data, stepper.model.n_actuators, stepper.limits)
+        values = read_float64_array(received.data)
+        if values is None:
+            try:
+                values = wire.deserialize(received.data, Float64MultiArray).data
+            except Exception as err:  # rclpy raises several types for malformed bytes
+                raise ValueError(f'{received.topic}: cannot deserialize: {err}') from err
+        return received.topic, parse_setpoints(values, stepper.model.n_actuators, stepper.limits)
 
     def _plan(self, batch: list[Received]) -> list[Outcome]:
         # in lockstep every command message is a grant: nothing is coalesced
@@ -566,7 +564,7 @@ class Simulator(Node):
 
     def _answer(self, received: Received, t: float, refusal: str) -> None:
         """``~/command_status``: why the command received at sim time ``t`` (s) was not applied (refusals only)."""
-        if refusal:
+        if refusal:     # published as bytes: a flood of refusals is answered one by one
             self._pub_status.publish(messages.command_status(
                 t, receipt_frame(received.topic, received.command_id), status_name(self, 'command'),
                 received.topic, received.command_id, refusal))

@@ -124,8 +124,8 @@ def parse_trajectory(msg: JointTrajectory, joints: Sequence[str], limits: tuple[
 
 def parse_trajectory_cdr(data: bytes, joints: Sequence[str], limits: tuple[float, float],
                          deserialize: Callable[[bytes], Any] | None = None) -> TrajectoryCommand:
-    """:func:`parse_trajectory` of a serialized JointTrajectory, reading the knots of the usual layout
-    (positions, velocities and accelerations on every point, as the actuator sends) with numpy instead of
+    """:func:`parse_trajectory` of a serialized JointTrajectory, reading the knots of the usual layouts
+    (positions, with or without velocities and accelerations, the same on every point) with numpy instead of
     deserializing one Python object per point; any other layout is deserialized by ``deserialize`` (the
     log tools give their decoder), by default rclpy's (:mod:`~micro_feeder.interface.wire`). A message of
     more than :data:`MAX_POINTS` points is refused without reading them. Raises :class:`CommandRejected`
@@ -142,7 +142,7 @@ def parse_trajectory_cdr(data: bytes, joints: Sequence[str], limits: tuple[float
     def knots(order: list[int]) -> tuple[np.ndarray, ...]:
         offsets = records['sec'].astype(np.int64) + records['nanosec'] * 1e-9
         columns = slice(None) if order == list(range(len(order))) else order    # no gather in joint order
-        return offsets, records['pos'][:, columns], records['vel'][:, columns], records['acc'][:, columns]
+        return offsets, *(records[f][:, columns] if f in records else None for f in ('pos', 'vel', 'acc'))
 
     return _checked(decoded.stamp, decoded.names, decoded.n_points, knots, joints, limits, decoded.frame_id)
 
