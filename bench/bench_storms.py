@@ -7,7 +7,7 @@ each: 5 kHz of valid trajectories, 5 kHz of NaN set-points, one 1,000,000-point 
 figures it prints, and reports the median of each rate with the range. Targets (docs/interface.md): at
 least 950 states per wall second under every flood, at most 50 log lines. The test itself asserts less
 (the loop keeps 60 % of its undisturbed rate): a shared 2-core machine cannot promise the target.
-Results: bench/results/simulator_storms.json.
+Results: bench/results/bench_storms.json.
 """
 
 from __future__ import annotations
@@ -57,7 +57,7 @@ def one_run() -> dict[str, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--runs', type=int, default=3, help='runs of the test (default 3); medians are reported')
-    results_json.add_arguments(parser, 'simulator_storms')
+    results_json.add_arguments(parser, 'bench_storms')
     args = parser.parse_args()
     load_before, start = [round(x, 2) for x in os.getloadavg()], time.perf_counter()
     runs = []
@@ -77,7 +77,7 @@ def main() -> None:
         else:
             figures.append(figure(key, what, round(median, 1), 'states/s', op='>=', target=TARGET, note=note))
         print(f'{what}: median {median:g} ({note})')
-    results_json.save(args, 'simulator_storms', 'Simulator under command storms', figures,
+    results_json.save(args, 'bench_storms', 'Simulator under command storms', figures,
                       purpose='The simulator executable at 1 kHz while a client floods it for 5 s each: 5 kHz of '
                               'valid trajectories, 5 kHz of NaN set-points, one 1,000,000-point trajectory '
                               '(32 MB); states published per second (median of the runs) and log lines.',

@@ -23,7 +23,7 @@ PERFORMANCE = ROOT / 'docs' / 'performance.md'
 README = ROOT / 'README.md'
 # sections in this order; results files not listed here follow, by name
 ORDER = ['bench_contact', 'bench_dynamics', 'bench_cutoff', 'bench_speed_ab', 'bench_explore', 'bench_nodes',
-         'simulator_storms', 'bench_hil', 'bench_recorder', 'bench_soak', 'bench_soak_run', 'bench_long_logs',
+         'bench_storms', 'bench_hil', 'bench_recorder', 'bench_soak', 'bench_soak_run', 'bench_long_logs',
          'bench_node_work', 'bench_track', 'bench_parts', 'bench_parts_soak']
 # README's table: (results file, figure key, what README calls it)
 README_FIGURES = [
@@ -35,7 +35,7 @@ README_FIGURES = [
     ('bench_explore', 'map_s', 'frequency × amplitude map, 100 × 100 runs, 2 processes'),
     ('bench_nodes', 'cpu_pct', 'simulator at 1 kHz, CPU of one core'),
     ('bench_nodes', 'tick_p99_ms', 'simulator at 1 kHz, tick period p99'),
-    ('simulator_storms', 'valid_flood_rate', 'simulator under a 5 kHz command flood, states/s'),
+    ('bench_storms', 'valid_flood_rate', 'simulator under a 5 kHz command flood, states/s'),
     ('bench_recorder', 'max_rate', 'recorder, highest rate without loss'),
     ('bench_soak', 'rtf_median_64', 'continuous strokes, 64 actuators, real-time factor'),
     ('bench_soak', 'sim_cpu_64_pct', 'continuous strokes, 64 actuators, simulator CPU'),
