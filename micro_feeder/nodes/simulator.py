@@ -103,9 +103,6 @@ BUSY_TIMEOUT = 0.5     # s a service waits for a tick in progress before answeri
 STOP_TIMEOUT = 0.3     # s destroy_node waits for each of the loop and intake threads (Ctrl-C answered < 1 s)
 COMMAND_QUEUE = 1000   # commands the subscription holds while the executor is busy (a flood waits, not lost)
 COMMAND_TYPES = {'actuator/trajectory': JointTrajectory, 'actuator/command': Float64MultiArray}
-
-
-
 TWIN_WATCH_DEPTH = 10    # events of ~/parameters kept for the twin check (own ones included)
 
 
