@@ -204,9 +204,11 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
         copy_into(y, ahead[1])
         fs[FS_MAX_SPEED] = max(fs[FS_MAX_SPEED], abs(y[1]))
         resume_which = iv[IV_AHEAD_WHICH]
-        if resume_which < 0 and record:
-            observe(t, y, iv, model, src, cur, st, aux, work[10], rec[n_rec])
-            n_rec += 1
+        if resume_which < 0:                        # accepted as the loop accepts a step: a mode entered
+            iv[IV_FRESH] = 0                        # before it is no longer fresh (a velocity jump where
+            if record:                              # the step ends was missed: a reversal of the slip)
+                observe(t, y, iv, model, src, cur, st, aux, work[10], rec[n_rec])
+                n_rec += 1
     fs[FS_AHEAD_T1] = math.nan
     need_eval = True
     t_next = t
