@@ -61,6 +61,7 @@ def test_an_outside_client_sees_every_transition_of_a_50_slide_run(ros_context: 
         client.create_subscription(msg_type, topic, got[topic].append, topic_qos(topic))
     executor = SingleThreadedExecutor(context=ros_context)
     executor.add_node(client)
+    missed = ''
     try:
         wait_until(lambda: client.count_publishers('particle/transitions') and got['particle/contact_state'], 120,
                    executor=executor, what='the simulator process to publish')
@@ -73,15 +74,21 @@ def test_an_outside_client_sees_every_transition_of_a_50_slide_run(ros_context: 
             loops = [st for d in got['/diagnostics'] for st in d.status if st.name == 'simulator: loop']
             return {kv.key: int(kv.value) for kv in loops[-1].values if kv.key in TRANSITION_KINDS} if loops else {}
 
-        wait_until(lambda: counters().get('slip_to_stick', 0) >= 50, 30, executor=executor,
-                   what='50 slides counted on /diagnostics')
-        expected = counters()
-        wait_until(lambda: len(got['particle/transitions']) >= sum(expected.values()), 10, executor=executor,
-                   what='every transition message')
+        try:
+            wait_until(lambda: counters().get('slip_to_stick', 0) >= 50, 30, executor=executor,
+                       what='50 slides counted on /diagnostics')
+            expected = counters()
+            wait_until(lambda: len(got['particle/transitions']) >= sum(expected.values()), 10, executor=executor,
+                       what='every transition message')
+        except AssertionError as err:     # what the processes said, to tell a starved run from a lost message
+            missed = (f'{err}: counters {counters()}, {len(got["particle/contact_state"])} contact states, '
+                      f'{len(got["particle/transitions"])} transitions received')
     finally:
         executor.shutdown()
         client.destroy_node()
         results = {name: stop_process(proc) for name, proc in (('actuator', act), ('simulator', sim))}
+    assert not missed, missed + ''.join(f'\n--- {name} (exit {code}):\n{out[-3000:]}'
+                                        for name, (code, out) in results.items())
     assert expected == {'stick_to_slip': 50, 'slip_to_stick': 50, 'take_off': 0, 'landing': 0}
     states = [m.data for m in got['particle/contact_state']]
     assert states == ['stuck'] + ['sliding', 'stuck'] * 50
