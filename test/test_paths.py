@@ -12,7 +12,8 @@ phases and places, piezo model on or off) the part must move the same on
 * ``sweep``: the row of a one-point ``sweep`` (distance, transition counts, regime).
 
 "Same" is: equal transition counts and final mode, distance within 1e-9 m or 1e-6 relative (or the
-scenario's own sensitivity to a stroke change as small as the knots' error, :func:`_conditioning`).
+scenario's own sensitivity to a stroke change as small as the knots' error, :func:`_conditioning`, plus
+each path's own integration error, :func:`_convergence`, where that is not enough).
 
 Two runs of the property: ``make test`` (``pytest test -m 'not paths'``) runs it on 200 scenarios of a fixed
 seed (the same ones every time, ~1 min) besides the listed scenarios (the issue's and those the property
@@ -207,11 +208,15 @@ def _conditioning(flat: dict[str, object], duration: float, offline: tuple) -> t
 
 def _convergence(flat: dict[str, object], duration: float, offline: float, stepped: float,
                  streaming: dict[str, object]) -> float:
-    """2x how far either path's distance moves when the integration tolerances are 10x looser: on a plate
-    (``surface.thickness`` > 0) whose strokes jump in velocity, the answers themselves move by ~1e-9 m per decade
-    of tolerance near 1e-13 (a trapezoid on 4 actuators: offline -9.14154, -9.14227, -9.14299 µm at 1e-11, 1e-12,
-    1e-13; stepped -9.14479, -9.14512, -9.14140 µm), so the paths cannot agree closer than that. Found by this
-    test (the listed plate case below); the slow convergence itself is not fixed."""
+    """2x how far either path's distance moves when the integration tolerances are 10x looser: a bound on each
+    path's own integration error, which adds to what the knots' error moves (:func:`_conditioning`). It matters
+    where the answers themselves converge slowly: on a plate (``surface.thickness`` > 0) whose strokes jump in
+    velocity (a trapezoid on 4 actuators: offline -9.14154, -9.14227, -9.14299 µm at 1e-11, 1e-12, 1e-13;
+    stepped -9.14479, -9.14512, -9.14140 µm), and where a part is still flying at the end (an asymmetric stroke
+    on 4 actuators, piezo on: each path moves 2.3-2.4e-10 m from 1e-12 to 1e-13, the knots 4e-10 m, the
+    paths differ by 1.03e-9 m). A systematic difference does not hide in it: the resumed-step bug of
+    test_split_runs.py gave 3.0e-9 m at every tolerance, and this allowance ~1e-11 m. Found by this test (the
+    listed cases below); the slow convergence itself is not fixed."""
     looser = {**flat, 'integration.tolerance': 1e-12, 'integration.event_tolerance': 1e-12}
     return 2.0 * max(abs(_offline(looser, duration)[0] - offline),
                      abs(_stepped(looser, duration, **streaming)[0] - stepped))
@@ -234,8 +239,8 @@ def _check_paths(scenario: dict[str, object], drawn: bool = True) -> None:
         assert stable, ('a listed scenario on a knife\'s edge', scenario)
     stepped = _stepped(flat, duration, **streaming)
     assert stepped[1:] == offline[1:], (scenario, offline, stepped)
-    if flat.get('surface.thickness', 0.0) > 0.0 and not _same_distance(stepped[0], offline[0], allowance):
-        allowance = max(allowance, _convergence(flat, duration, offline[0], stepped[0], streaming))
+    if not _same_distance(stepped[0], offline[0], allowance):     # each path's own error adds to the knots'
+        allowance += _convergence(flat, duration, offline[0], stepped[0], streaming)
     assert _same_distance(stepped[0], offline[0], allowance), (scenario, offline, stepped, allowance)
     row = sweep(flat, 'stroke.amplitude', [StrokeParams.from_flat(flat).amplitude], duration=duration)[0]
     assert row['error'] == '', (scenario, row)
@@ -355,6 +360,15 @@ FOUND_CASES = [   # found by the property below, fixed
      'stroke.phases': [0.3984375, 0.0078125, 0.71875], 'surface.centers': [-0.0004, 0.0, 0.0004],
      'surface.widths': [0.0005140165167146125, 0.0005, 0.001306796362616968],
      'particle.x0': 0.0, 'piezo.enabled': False, 'surface.thickness': 0.0002356499179202825},
+    # flying at the end, piezo on, streamed in 16-point windows: the paths differ by 1.03e-9 m, the knots' error
+    # moves the part 4e-10 m and each path's own integration error at 1e-13 is ~2.4e-10 m (_convergence)
+    {'stroke.waveform': 'asymmetric', 'stroke.count': 2, 'stroke.pause': 0.0, 'stroke.delay': 0.001953125,
+     'stroke.duty': 0.765625, 'stroke.amplitude': 0.00013534777236204486, 'stroke.frequency': 1372.0,
+     'stroke.phases': [0.9375, 0.0, 0.7578125, 0.88671875],
+     'surface.centers': [-0.0006602249275819911, -0.00022007497586066371, 0.00022007497586066371,
+                         0.0006602249275819911],
+     'surface.widths': [0.0005250102922585999, 0.000673391237972895, 0.001, 0.0012877018804127998],
+     'particle.x0': 0.0, 'piezo.enabled': True, 'stream.max_points': 16, 'stream.window': 0.02},
 ]
 
 
