@@ -63,18 +63,19 @@ class TrajectoryCommand:
         return self.offsets.size == 0
 
 
-def _check_range(values: np.ndarray, low: float, high: float, what: str, unit: str) -> None:
-    """Refuse non-finite values and values outside [low, high] (one example named)."""
+def _check_range(values: np.ndarray, low: float, high: float, what: str, unit: str, bounds: str = '') -> None:
+    """Refuse non-finite values and values outside [low, high] (one example named; ``bounds`` says what the
+    interval is)."""
     if values.size == 0 or (values.min() >= low and values.max() <= high):   # a NaN fails both: checked below
         return
     if not np.all(np.isfinite(values)):
         raise CommandRejected(f'{what}: non-finite value')
     bad = float(values[(values < low) | (values > high)].flat[0])
-    raise CommandRejected(f'{what} {bad:g} {unit} outside [{low:g}, {high:g}] {unit}')
+    raise CommandRejected(f'{what} {bad:g} {unit} outside [{low:g}, {high:g}] {unit}{bounds}')
 
 
 def _check_strokes(values: np.ndarray, limits: tuple[float, float], what: str) -> None:
-    _check_range(values, limits[0], limits[1], f'{what}: stroke', 'm (the piezo limits)')
+    _check_range(values, limits[0], limits[1], f'{what}: stroke', 'm', ' (the piezo limits)')
 
 
 def _field(points: Sequence[JointTrajectoryPoint], attr: str, order: list[int], required: bool) -> np.ndarray | None:
