@@ -58,7 +58,11 @@ def test_controller_crash_leaves_the_simulator_running_and_the_log_complete(ros_
     controller = None
     try:
         msgs = probe.msgs
-        wait_until(lambda: len(msgs['particle/pose']) > 10, 120, executor=executor, what='the simulator')
+        try:
+            wait_until(lambda: len(msgs['particle/pose']) > 10, 120, executor=executor, what='the simulator')
+        except AssertionError as err:   # say why: a simulator that exited, or one that runs but is not heard
+            status, out = stop_process(sim)
+            raise AssertionError(f'{err}; simulator exit {status} ({sim.args}), its log:\n{out[-3000:]}') from None
         # ~30 strokes away, 1 s of sim time (the most settle_time allows) between bursts: still running when the
         # recorder has matched it (with 0.5 s a loaded CI run saw the controller done first, nothing recorded)
         controller = start_process('feed_controller', '-p', 'feed.target_x:=0.2e-3', '-p', 'settle_time:=1.0')
