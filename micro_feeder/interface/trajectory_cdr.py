@@ -25,16 +25,9 @@ from builtin_interfaces.msg import Time
 from .cdr import ENCAPSULATION, STAMP, put_string, put_uint32
 
 
-def _record(n: int) -> np.dtype:
-    """One point with positions, velocities and accelerations of ``n`` joints, no effort."""
-    return np.dtype([('n_pos', '<u4'), ('pos', '<f8', (n,)), ('n_vel', '<u4'), ('pad_vel', '<u4'),
-                     ('vel', '<f8', (n,)), ('n_acc', '<u4'), ('pad_acc', '<u4'), ('acc', '<f8', (n,)),
-                     ('n_effort', '<u4'), ('sec', '<i4'), ('nanosec', '<u4')])
-
-
 def point_bytes(n_joints: int) -> int:
     """Serialized size (bytes) of one knot with positions, velocities and accelerations of ``n_joints``."""
-    return _record(n_joints).itemsize
+    return _full_point(n_joints).itemsize
 
 
 def encode(names: Sequence[str], offsets_ns: np.ndarray, positions: np.ndarray, velocities: np.ndarray,
@@ -51,7 +44,7 @@ def encode(names: Sequence[str], offsets_ns: np.ndarray, positions: np.ndarray, 
     for name in names:
         put_string(head, name)
     put_uint32(head, n_points)
-    record = np.zeros(n_points, dtype=_record(n))
+    record = np.zeros(n_points, dtype=_full_point(n))
     record['n_pos'] = record['n_vel'] = record['n_acc'] = n
     record['pos'], record['vel'], record['acc'] = positions, velocities, accelerations
     record['sec'], record['nanosec'] = np.divmod(np.asarray(offsets_ns, dtype=np.int64), 1_000_000_000)
@@ -131,6 +124,12 @@ def _point_layout(start: int, n: int, present: tuple[bool, ...]) -> np.dtype:
         names.append(field), formats.append(fmt), offsets.append(p - start)
         p += 4
     return np.dtype({'names': names, 'formats': formats, 'offsets': offsets, 'itemsize': p - start})
+
+
+def _full_point(n: int) -> np.dtype:
+    """A point with positions, velocities and accelerations of ``n`` joints that starts 4 bytes past an
+    8-byte boundary (every point after the first, as :func:`encode` writes them)."""
+    return _point_layout(4, n, (True, True, True))
 
 
 def _read_points(body: memoryview, p: int, n_points: int) -> dict[str, np.ndarray] | None:

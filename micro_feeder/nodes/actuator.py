@@ -90,6 +90,7 @@ class Actuator(Node):
         self.windows = 0
         self.underruns = 0
         self.rephases = 0                            # streams re-phased after a reset, restart or stall
+        self.last_rephase = ''                       # why the stream last re-phased, in words
         self.sim_time: float | None = None           # latest sim time seen on actuator/joint_states (s)
         self._stream: StrokeStream | None = None
         self._pending_stream = False                 # streamed start waiting for the first sim time
@@ -263,6 +264,7 @@ class Actuator(Node):
         windows, why = stream.follow(now, self.get_parameter('stream.lead').value, new_simulator=new_simulator)
         if why is not None:
             self.rephases += 1
+            self.last_rephase = why
             self.underruns += 'passed the strokes' in why
             self.get_logger().warning(f'stream re-phased: {why}', throttle_duration_sec=5.0)
         for number, window in enumerate(windows, start=stream.windows_made - len(windows) + 1):
@@ -285,6 +287,7 @@ class Actuator(Node):
         why = self._stream.refused(window[1], self.sim_time, self.get_parameter('stream.lead').value)
         if why is not None:
             self.rephases += 1
+            self.last_rephase = why
             self.get_logger().warning(f'stream re-phased: {why}', throttle_duration_sec=5.0)
 
     def _on_sim_time(self, data: bytes) -> None:
@@ -356,6 +359,8 @@ class Actuator(Node):
     def _publish_diagnostics(self) -> None:
         items = {'state': self.state(), 'bursts_sent': self.bursts, 'stops_sent': self.stops,
                  'windows_sent': self.windows, 'stream_underruns': self.underruns, 'stream_rephases': self.rephases,
+                 'last_rephase': self.last_rephase,
+                 'last_rephase_at': _seconds_text(getattr(self._stream, 'rephased_at', None)),
                  'streaming': self._stream is not None, 'subscribers': self._pub.get_subscription_count(),
                  'commands_refused': self.refusals.refused, 'last_refusal': self.refusals.last}
         if self.goals is not None:       # the goals' answers: refusals and failures come back in their results
@@ -369,6 +374,11 @@ class Actuator(Node):
                                   values=[KeyValue(key=k, value=str(v)) for k, v in items.items()])
         self._pub_diag.publish(DiagnosticArray(header=Header(stamp=self.get_clock().now().to_msg()),
                                                status=[status]))
+
+
+def _seconds_text(t: float | None) -> str:
+    """A sim time for /diagnostics: seconds to the µs, or empty when there is none."""
+    return '' if t is None else f'{t:.6f}'
 
 
 def main(args: list[str] | None = None) -> int:

@@ -58,6 +58,7 @@ class StrokeStream:
         self._max_spacing = max_spacing(params, knots_per_stroke)
         self._ramp_from: int | None = None                 # burst time (ns) a re-phased stream's next window starts
         self._last_now: float | None = None                # sim time of the last follow() (s)
+        self.rephased_at: float | None = None              # sim time (s) of the last re-phase
         self.windows_made = 0                              # windows returned by next_window(): the k of w<k>
         self._rephased_after = 0                           # windows made before the last re-phase (in flight)
 
@@ -104,11 +105,13 @@ class StrokeStream:
                      f'sim time went back from {self._last_now:.6f} s to {now:.6f} s (a reset, or a new simulator)')
             why = f'{cause}: restarted at t = {at_ns * 1e-9:.6f} s'
             self.rejoin(at_ns, keep_phase=False)
+            self.rephased_at = now
         elif self.sent_ns > 0 and not self.done and self.scheduled_until < now:
             why = (f'sim time {now:.6f} s passed the strokes scheduled (until {self.scheduled_until:.6f} s: the '
                    f'sender stalled or lost the simulator, or stream.lead is short): rejoined at t = '
                    f'{at_ns * 1e-9:.6f} s')
             self.rejoin(at_ns, keep_phase=True)
+            self.rephased_at = now
         self._last_now = now
         windows = []
         while not self.done and self.scheduled_until < now + lead:
@@ -125,6 +128,7 @@ class StrokeStream:
             return None
         at_ns = round((now + lead) * 1e9)
         self.rejoin(at_ns, keep_phase=True)
+        self.rephased_at = now
         return f'window {window} refused by the simulator at {now:.6f} s: rejoined at t = {at_ns * 1e-9:.6f} s'
 
     def rejoin(self, at_ns: int, *, keep_phase: bool) -> None:
