@@ -369,6 +369,14 @@ FOUND_CASES = [   # found by the property below, fixed
                          0.0006602249275819911],
      'surface.widths': [0.0005250102922585999, 0.000673391237972895, 0.001, 0.0012877018804127998],
      'particle.x0': 0.0, 'piezo.enabled': True, 'stream.max_points': 16, 'stream.window': 0.02},
+    # a part stuck on a 10 µm plate slid for 2.8 µs inside the first cubic piece of a jerk-limited ramp (48 µs,
+    # one step offline): the stick margin had two extrema in the step, which hid the dip; a stuck part on a
+    # plate now steps at most a quarter of such a piece (kernel.polynomial_step)
+    {'stroke.waveform': 'trapezoid', 'stroke.count': 1, 'stroke.pause': 0.0, 'stroke.delay': 0.0,
+     'stroke.duty': 0.75, 'stroke.amplitude': 0.0001433827908177081, 'stroke.frequency': 649.0,
+     'stroke.phases': [0.0], 'surface.centers': [0.0], 'surface.widths': [0.0005],
+     'particle.x0': 0.0005756595688528617, 'piezo.enabled': False, 'stream.max_points': 2000,
+     'stream.window': 0.02, 'surface.thickness': 1e-05},
 ]
 
 

@@ -72,6 +72,7 @@ from .rhs import (
     interp,
     locate_all,
     margin_slopes,
+    polynomial_step,
     strokes_at,
     surface_graph,
     wave_step,
@@ -216,7 +217,7 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
     same_instant = 0
     t_last_event = math.nan
     h_cap = 0.0
-    h_wave = math.inf
+    h_wave = h_poly = math.inf
     dip_retries = 0
     start_known, start_slope0, start_slope1 = iv[IV_START_KNOWN] != 0, fs[FS_START_SLOPE0], fs[FS_START_SLOPE1]
     t_req0 = t_rate0 = t_req1 = t_rate1 = math.nan      # T_req and dT_req/dt where the step starts and ends
@@ -237,6 +238,7 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
             if t >= t_next:                     # a new segment (or the first): point the cursor at it
                 t_next = locate_all(src, t, cur)
                 h_wave = wave_step(src, cur)
+                h_poly = polynomial_step(src, cur) if model.half_thickness > 0.0 else math.inf
             if threshold and mode != FLYING:
                 kind = threshold_decision(t, y, model, src, cur, st, aux, iv, fs)
                 if kind >= 0:
@@ -272,6 +274,8 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
                 h = min(dt if moving or threshold else model.check_step, t_next - t, t_limit - t)
             if dip_search and (error_control or not moving):     # fixed-step RK4 keeps its dt
                 h = min(h, h_wave)
+                if mode == STUCK:
+                    h = min(h, h_poly)
             if h_cap > 0.0:
                 h = min(h, h_cap)
                 h_cap = 0.0

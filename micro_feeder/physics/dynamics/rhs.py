@@ -466,6 +466,30 @@ def wave_step(src: tuple, cur: np.ndarray) -> float:
     return math.pi / (4.0 * fastest) if fastest > 0.0 else math.inf
 
 
+@jit
+def polynomial_step(src: tuple, cur: np.ndarray) -> float:
+    """Largest step (s) for a part stuck on a plate: a quarter of the shortest active polynomial segment whose
+    stroke accelerates (inf when none). There the stick margin mixes the stroke's acceleration, which moves
+    the material point along the feeder, with its position and velocity, which load the part: within one
+    cubic piece of a jerk-limited ramp it dipped below 0 for 2.8 µs and rose again, two extrema in one
+    step, which the dip search (one extremum per step) cannot see."""
+    seg_start, seg_coef = src[5], src[6]
+    shortest = math.inf
+    for k in range(cur.shape[0]):
+        j, i = cur[k, 0], cur[k, 1]
+        if j < 0:
+            continue
+        trig = False
+        for h in range(N_TRIG):
+            trig = trig or seg_coef[k, i, N_POLY + 3 * h + 2] != 0.0
+        accelerates = False
+        for c in range(2, N_POLY):
+            accelerates = accelerates or seg_coef[k, i, c] != 0.0
+        if accelerates and not trig:
+            shortest = min(shortest, seg_start[k, i + 1] - seg_start[k, i])
+    return shortest / 4.0
+
+
 @jit_inline
 def copy_into(target: np.ndarray, values: np.ndarray) -> None:
     """target[:] = values, element by element (a slice assignment may allocate a temporary)."""
