@@ -229,3 +229,34 @@ def test_info_cli_prints_the_missing_start(tmp_path, capsys):
     write_run_log(tmp_path / 'log', first=670)
     assert main(['info', str(tmp_path / 'log')]) == 0
     assert 'start missing: first pose at sim time 0.670000 s' in capsys.readouterr().out
+
+
+def test_the_summary_indexes_every_chunk_as_the_file_holds_it(tmp_path):
+    """The sink keeps no chunk index in memory (a 1 MiB chunk goes out every ~0.2 s at 1 kHz, for hours): it
+    reads them back from the file when it writes the summary. Every chunk of a log of ~150 is indexed where
+    the file holds it, with its times, sizes and message indexes, as the mcap library reads the records."""
+    from mcap.records import Chunk
+    from mcap.stream_reader import StreamReader
+
+    path = tmp_path / 'log.mcap'
+    write_motion_log(path, n=3000, chunk_size=4_000)
+    (mcap_file,) = path.glob('*.mcap') if path.is_dir() else (path,)
+    with open(mcap_file, 'rb') as stream:
+        summary = make_reader(stream).get_summary()
+    chunks = [r for r in StreamReader(str(mcap_file), emit_chunks=True).records if isinstance(r, Chunk)]
+    indexes = summary.chunk_indexes
+    assert len(indexes) == len(chunks) == summary.statistics.chunk_count > 100
+    raw = mcap_file.read_bytes()
+    for index, chunk in zip(indexes, chunks, strict=True):
+        assert raw[index.chunk_start_offset] == 0x06                          # a Chunk record starts there
+        assert (index.message_start_time, index.message_end_time) == (chunk.message_start_time,
+                                                                      chunk.message_end_time)
+        assert (index.uncompressed_size, index.compressed_size, index.compression) == (
+            chunk.uncompressed_size, len(chunk.data), chunk.compression)
+        assert index.chunk_length == 9 + int.from_bytes(raw[index.chunk_start_offset + 1:][:8], 'little')
+        assert index.message_index_length > 0
+        for channel, offset in index.message_index_offsets.items():
+            assert raw[offset] == 0x07                                        # a MessageIndex record
+            assert int.from_bytes(raw[offset + 9:offset + 11], 'little') == channel
+    assert summary.statistics.message_start_time == min(c.message_start_time for c in chunks)
+    assert summary.statistics.message_end_time == max(c.message_end_time for c in chunks)

@@ -2,9 +2,13 @@
 
 :class:`McapSink` is the stream given to ``mcap.writer.Writer``: every write goes straight to the file
 descriptor (no buffer that a failed write would leave half-flushed), and what a summary needs of the bytes
-that reached the file is kept as they go by: the chunk indexes, the message counts per channel (from the
-message indexes), the data-section CRC. The *safe point* is the end of the last record group that reached
-the file whole (a chunk with its message indexes). When a write fails (disk full, file too large, I/O
+that reached the file is kept as they go by: the message counts per channel (from the message indexes), the
+data-section CRC, the number of chunks and the time span they cover, and what cutting the file back needs of
+the last :data:`RECENT_CHUNKS` chunks. The chunk indexes themselves are not kept: the summary reads them back
+from the file (each chunk's header and message index records, never its data) when the file is finished, so
+the memory used stays the same whatever the log's length (a 1 MiB chunk goes out every ~0.2 s at 1 kHz).
+The *safe point* is the end of the last record group that reached the file whole (a chunk with its message
+indexes). When a write fails (disk full, file too large, I/O
 error) or the file is deleted under the writer, :meth:`McapSink.finish_at_safe_point` cuts the file back
 to the safe point (freeing what the failed chunk took) and writes a metadata record, the data end, a
 summary and the footer there, or :meth:`McapSink.restore` first copies the safe prefix of a deleted file
@@ -20,8 +24,8 @@ from __future__ import annotations
 import os
 import struct
 import zlib
-from collections import defaultdict
-from collections.abc import Iterator
+from collections import defaultdict, deque
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -42,65 +46,56 @@ from mcap.records import (
 MAGIC = b'\x89MCAP0\r\n'
 HEAD = 9              # opcode (1 byte) + record length (8 bytes)
 COPY_PIECE = 1 << 20  # bytes copied at a time when restoring a deleted file
-COUNT = struct.Struct('<HI')  # a chunk's messages on one channel: channel id, count
 CRC = struct.Struct('<I')
-INDEX_HEAD = struct.Struct('<QQQ')  # a ChunkIndex record's first fields: message start and end time, chunk offset
+RECORD_HEAD = struct.Struct('<BQ')  # a record's opcode and length
+CHUNK_HEAD = struct.Struct('<QQQII')  # a Chunk record's first fields: message start/end time, sizes, CRC, name length
+RECENT_CHUNKS = 8     # whole chunks the safe point can be moved back over (the writer drops at most 3)
 
 
 class _Chunk:
-    """A whole chunk as a summary needs it, in ~0.4 kB whatever the log's length (a chunk goes out every
-    second, for hours): its ChunkIndex record serialized, and what cutting the file back to its start needs
-    (the data CRC there and its messages per channel), packed."""
+    """What moving the safe point back to a whole chunk's start needs: where it starts, the data CRC there,
+    its messages per channel, and the time span of the chunks before it. Only the last :data:`RECENT_CHUNKS`
+    are kept."""
 
-    __slots__ = ('cut', 'index_record')
+    __slots__ = ('counts', 'crc_before', 'span_before', 'start_offset')
 
-    def __init__(self, index: ChunkIndex, crc_before: int, counts: dict[int, int]):
-        builder = RecordBuilder()
-        index.write(builder)
-        self.index_record = builder.end()
-        self.cut = CRC.pack(crc_before) + b''.join(COUNT.pack(channel, n) for channel, n in counts.items())
-
-    @property
-    def start_time(self) -> int:
-        return INDEX_HEAD.unpack_from(self.index_record, HEAD)[0]
-
-    @property
-    def end_time(self) -> int:
-        return INDEX_HEAD.unpack_from(self.index_record, HEAD)[1]
-
-    @property
-    def start_offset(self) -> int:
-        return INDEX_HEAD.unpack_from(self.index_record, HEAD)[2]
-
-    @property
-    def crc_before(self) -> int:
-        return CRC.unpack_from(self.cut)[0]
-
-    def channel_counts(self) -> Iterator[tuple[int, int]]:
-        return COUNT.iter_unpack(self.cut[CRC.size:])
+    def __init__(self, start_offset: int, crc_before: int, counts: dict[int, int],
+                 span_before: tuple[int, int] | None):
+        self.start_offset = start_offset
+        self.crc_before = crc_before
+        self.counts = tuple(counts.items())
+        self.span_before = span_before
 
 
 @dataclass
 class _State:
-    """What a summary needs of the file up to one position: the whole chunks (:class:`_Chunk`), the messages
-    per channel, the data CRC; and the chunk being written (its index filled in as its message indexes go by,
-    its messages per channel, the data CRC where it starts)."""
+    """What a summary needs of the file up to one position, in memory that does not grow with the file: the
+    number of whole chunks, the span of their messages' log times, the messages per channel, the data CRC, the
+    last :data:`RECENT_CHUNKS` chunks (:class:`_Chunk`); and the chunk being written (its index filled in as
+    its message indexes go by, its messages per channel, the data CRC where it starts). The chunk indexes of
+    the summary are read back from the file (:meth:`McapSink._chunk_indexes`)."""
 
     position: int = 0
     crc: int = 0
-    chunks: list[_Chunk] = field(default_factory=list)
+    chunk_count: int = 0
+    span: tuple[int, int] | None = None
+    recent: deque[_Chunk] = field(default_factory=lambda: deque(maxlen=RECENT_CHUNKS))
     counts: dict[int, int] = field(default_factory=lambda: defaultdict(int))
     open: tuple[ChunkIndex, dict[int, int], int] | None = None
 
     def seal(self) -> None:
-        """The chunk being written is whole: keep it compact."""
+        """The chunk being written is whole: count it, keep what cutting back to its start needs."""
         if self.open is not None:
             index, counts, crc_before = self.open
-            self.chunks.append(_Chunk(index, crc_before, counts))
+            self.recent.append(_Chunk(index.chunk_start_offset, crc_before, counts, self.span))
+            start, end = index.message_start_time, index.message_end_time
+            self.span = (start, end) if self.span is None else (min(self.span[0], start), max(self.span[1], end))
+            self.chunk_count += 1
             self.open = None
 
     def copy(self) -> _State:
-        return _State(self.position, self.crc, list(self.chunks), defaultdict(int, self.counts), None)
+        return _State(self.position, self.crc, self.chunk_count, self.span,
+                      deque(self.recent, maxlen=RECENT_CHUNKS), defaultdict(int, self.counts), None)
 
 
 class McapSink:
@@ -153,7 +148,7 @@ class McapSink:
 
     @property
     def safe_chunks(self) -> int:
-        return len(self._safe.chunks)
+        return self._safe.chunk_count
 
     @property
     def safe_messages(self) -> int:
@@ -167,10 +162,7 @@ class McapSink:
     @property
     def safe_span(self) -> tuple[int, int] | None:
         """First and last log time [ns] of the messages up to the safe point (None: none)."""
-        chunks = self._safe.chunks
-        if not chunks:
-            return None
-        return min(c.start_time for c in chunks), max(c.end_time for c in chunks)
+        return self._safe.span
 
     # -- faults --------------------------------------------------------------------------------------
     def deleted(self) -> bool:
@@ -211,13 +203,15 @@ class McapSink:
 
     def drop_last_chunk(self) -> bool:
         """Move the safe point back to the start of the last whole chunk (to make room for the summary in
-        a file that has reached its size limit); False when there is no chunk left."""
+        a file that has reached its size limit); False when there is no chunk left, or the safe point was moved
+        back over the last :data:`RECENT_CHUNKS` already."""
         safe = self._safe
-        if not safe.chunks:
+        if not safe.recent:
             return False
-        chunk = safe.chunks.pop()
-        safe.position, safe.crc = chunk.start_offset, chunk.crc_before
-        for channel, n in chunk.channel_counts():
+        chunk = safe.recent.pop()
+        safe.position, safe.crc, safe.span = chunk.start_offset, chunk.crc_before, chunk.span_before
+        safe.chunk_count -= 1
+        for channel, n in chunk.counts:
             safe.counts[channel] -= n
         return True
 
@@ -239,6 +233,40 @@ class McapSink:
             raise
 
     # -- internals -----------------------------------------------------------------------------------
+    def _pread(self, size: int, at: int) -> bytes:
+        data = os.pread(self.fd, size, at)
+        if len(data) < size:
+            raise OSError(f'{self.path}: ends at byte {at + len(data):,}, before its last whole chunk')
+        return data
+
+    def _chunk_indexes(self, end: int) -> Iterator[ChunkIndex]:
+        """The ChunkIndex of every chunk before ``end`` (the safe point), read back from the file: each chunk
+        record's header and the head of each of its message index records (the records after it), never
+        their data. Raises OSError."""
+        pos, index = len(MAGIC), None
+        while pos + HEAD <= end:
+            op, length = RECORD_HEAD.unpack(self._pread(HEAD, pos))
+            body = pos + HEAD
+            if op == Opcode.CHUNK:
+                if index is not None:
+                    yield index
+                head = self._pread(min(length, CHUNK_HEAD.size + 64), body)
+                start, stop, size, _crc, name_length = CHUNK_HEAD.unpack_from(head)
+                if len(head) < CHUNK_HEAD.size + name_length + 8:
+                    head = self._pread(CHUNK_HEAD.size + name_length + 8, body)
+                compression = head[CHUNK_HEAD.size:CHUNK_HEAD.size + name_length].decode()
+                (records_length,) = struct.unpack_from('<Q', head, CHUNK_HEAD.size + name_length)
+                index = ChunkIndex(message_start_time=start, message_end_time=stop, chunk_start_offset=pos,
+                                   chunk_length=HEAD + length, message_index_offsets={}, message_index_length=0,
+                                   compression=compression, compressed_size=records_length, uncompressed_size=size)
+            elif op == Opcode.MESSAGE_INDEX and index is not None:
+                (channel_id,) = struct.unpack('<H', self._pread(2, body))
+                index.message_index_offsets[channel_id] = pos
+                index.message_index_length += HEAD + length
+            pos = body + length
+        if index is not None:
+            yield index
+
     def _raw(self, data: bytes) -> None:
         view = memoryview(data)
         while view:
@@ -261,27 +289,23 @@ class McapSink:
         summary = RecordBuilder()
         offsets = []
 
-        def group(opcode: int, items: list) -> None:
+        def group(opcode: int, items: Iterable) -> None:
             start = summary.count
             for item in items:
-                if isinstance(item, _Chunk):
-                    summary.write(item.index_record)
-                else:
-                    item.write(summary)
+                item.write(summary)
             offsets.append(SummaryOffset(group_opcode=opcode, group_start=summary_start + start,
                                          group_length=summary.count - start))
 
-        span = [(c.start_time, c.end_time) for c in safe.chunks]
+        span = safe.span or (0, 0)
         statistics = Statistics(
             message_count=sum(safe.counts.values()), schema_count=len(self.schemas),
             channel_count=len(self.channels), attachment_count=0, metadata_count=len(metadata),
-            chunk_count=len(safe.chunks), message_start_time=min((s for s, _ in span), default=0),
-            message_end_time=max((e for _, e in span), default=0),
+            chunk_count=safe.chunk_count, message_start_time=span[0], message_end_time=span[1],
             channel_message_counts=dict(safe.counts))
         group(Opcode.SCHEMA, list(self.schemas.values()))
         group(Opcode.CHANNEL, list(self.channels.values()))
         group(Opcode.STATISTICS, [statistics])
-        group(Opcode.CHUNK_INDEX, safe.chunks)
+        group(Opcode.CHUNK_INDEX, self._chunk_indexes(at))
         group(Opcode.METADATA_INDEX, indexes)
         summary_offset_start = summary_start + summary.count
         for offset in offsets:
