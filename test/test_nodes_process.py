@@ -17,6 +17,15 @@ from micro_feeder.interface.names import TRANSITION_KINDS
 from micro_feeder.nodes._ros import topic_qos
 
 
+def _actuator_status(msgs: dict[str, list]) -> dict[str, str]:
+    """The latest ``actuator: stroke`` status on /diagnostics, as a dict (empty before one)."""
+    for array in reversed(msgs['/diagnostics']):
+        for status in array.status:
+            if status.name.endswith('actuator: stroke'):
+                return {kv.key: kv.value for kv in status.values}
+    return {}
+
+
 def test_actuator_and_simulator_processes(ros_context: Context) -> None:
     """Up to 120 s for the first pose: a fresh process compiles the physics kernel when numba's cache is stale."""
     sim = start_process('simulator', '-p', 'stroke.count:=2', '-p', 'markers_rate:=10.0')
@@ -29,6 +38,10 @@ def test_actuator_and_simulator_processes(ros_context: Context) -> None:
         wait_until(lambda: len(msgs['particle/pose']) > 50 and msgs['/clock'], 120, executor=executor,
                    what='poses and clock from the simulator process')
         x0 = msgs['particle/pose'][-1].pose.position.x
+        # a burst started before the actuator's publisher matched the simulator's subscription would reach only
+        # this client (discovery took seconds on a loaded machine): start once the actuator says it is reached
+        wait_until(lambda: _actuator_status(msgs).get('simulator_reached') == 'True', 60, executor=executor,
+                   what='the actuator reaching the simulator')
         assert probe.call(executor, Trigger, 'actuator/start', timeout=20).success
         wait_until(lambda: abs(msgs['particle/pose'][-1].pose.position.x - x0) > 1e-6, 20, executor=executor,
                    what='the part to move after actuator/start')
@@ -67,6 +80,8 @@ def test_an_outside_client_sees_every_transition_of_a_50_slide_run(ros_context: 
                    executor=executor, what='the simulator process to publish')
         start = client.create_client(Trigger, 'actuator/start')
         wait_until(start.service_is_ready, 30, executor=executor, what='actuator/start')
+        wait_until(lambda: _actuator_status(got).get('simulator_reached') == 'True', 60, executor=executor,
+                   what='the actuator reaching the simulator')     # else the burst reaches only this client
         future = start.call_async(Trigger.Request())
         wait_until(future.done, 10, executor=executor, what='burst sent')
 

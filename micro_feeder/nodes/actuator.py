@@ -136,7 +136,11 @@ class Actuator(Node):
             n = pos.shape[1]
             self._pub.publish(trajectory_cdr.encode(joint_names(n), np.round(times * 1e9), pos, vel, acc, Time(),
                                                     self._command_id()))
-            return f'burst sent: {times.size} knots on {n} joints, {times[-1]:.6g} s'
+            sent = f'burst sent: {times.size} knots on {n} joints, {times[-1]:.6g} s'
+            if self._simulator_subscriptions():
+                return sent
+            return (f'{sent}; but no simulator is reached on actuator/trajectory yet (discovery), so only other '
+                    f'subscribers get it: wait for simulator_reached on /diagnostics and start again')
         self._pending_stream = True
         if self.sim_time is None:
             return 'burst streamed from the first sim time seen on actuator/joint_states'
@@ -359,6 +363,7 @@ class Actuator(Node):
     def _publish_diagnostics(self) -> None:
         items = {'state': self.state(), 'bursts_sent': self.bursts, 'stops_sent': self.stops,
                  'windows_sent': self.windows, 'stream_underruns': self.underruns, 'stream_rephases': self.rephases,
+                 'simulator_reached': bool(self._simulator_subscriptions()),
                  'last_rephase': self.last_rephase,
                  'last_rephase_at': _seconds_text(getattr(self._stream, 'rephased_at', None)),
                  'streaming': self._stream is not None, 'subscribers': self._pub.get_subscription_count(),
