@@ -377,6 +377,12 @@ FOUND_CASES = [   # found by the property below, fixed
      'stroke.phases': [0.0], 'surface.centers': [0.0], 'surface.widths': [0.0005],
      'particle.x0': 0.0005756595688528617, 'piezo.enabled': False, 'stream.max_points': 2000,
      'stream.window': 0.02, 'surface.thickness': 1e-05},
+    # stepped: at a knot (the ramp's jerk flip) the two commanded pieces gave a stuck part on a plate material
+    # velocities 1.35e-11 m/s apart (rounding), read as a velocity jump (tolerance 1e-12): a zero-length slide
+    {'stroke.waveform': 'trapezoid', 'stroke.count': 1, 'stroke.pause': 0.0, 'stroke.delay': 0.0,
+     'stroke.duty': 0.859375, 'stroke.amplitude': 2e-05, 'stroke.frequency': 1468.0, 'stroke.phases': [0.0],
+     'surface.centers': [0.0], 'surface.widths': [0.001], 'particle.x0': 0.0005666510997854919,
+     'piezo.enabled': False, 'stream.max_points': 2000, 'stream.window': 0.02, 'surface.thickness': 1e-05},
 ]
 
 

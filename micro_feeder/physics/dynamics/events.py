@@ -42,8 +42,10 @@ from .layout import (
 from .rhs import contact_load, evaluate, felt_range, sign, strokes_at, surface_graph, surface_load
 from .steppers import dopri5_dense, hermite, interpolant_reach
 
-JUMP_TOLERANCE = 1e-12   # relative (1 + |ẋ| in m/s): a stuck part's velocity and its material point's differ
-                         # by more only after the material's velocity jumped (both are set from one evaluation)
+JUMP_TOLERANCE = 1e-9    # relative (1 + |ẋ| in m/s): a stuck part's velocity and its material point's differ
+                         # by more only after the material's velocity jumped (both are set from one evaluation;
+                         # across a commanded knot the two pieces' polynomials agree to ~1e-11 relative, which
+                         # 1e-12 read as a jump: a zero-length slide; friction absorbs 1e-9 m/s in ~1e-11 s)
 
 
 @jit
