@@ -99,19 +99,17 @@ class StrokeStream:
         phase with sim time, the missed strokes skipped). Nothing stale is ever sent, and a re-phased stream
         ramps from wherever the simulator's strokes are, so they never jump."""
         why = None
-        at_ns = round((now + lead) * 1e9)
         if new_simulator or (self._last_now is not None and now < self._last_now - TIME_BACK):
             cause = ('a new simulator' if new_simulator else
                      f'sim time went back from {self._last_now:.6f} s to {now:.6f} s (a reset, or a new simulator)')
+            at_ns = self.rejoin(now, lead, keep_phase=False)
             why = f'{cause}: restarted at t = {at_ns * 1e-9:.6f} s'
-            self.rejoin(at_ns, keep_phase=False)
-            self.rephased_at = now
         elif self.sent_ns > 0 and not self.done and self.scheduled_until < now:
-            why = (f'sim time {now:.6f} s passed the strokes scheduled (until {self.scheduled_until:.6f} s: the '
+            scheduled_until = self.scheduled_until
+            at_ns = self.rejoin(now, lead, keep_phase=True)
+            why = (f'sim time {now:.6f} s passed the strokes scheduled (until {scheduled_until:.6f} s: the '
                    f'sender stalled or lost the simulator, or stream.lead is short): rejoined at t = '
                    f'{at_ns * 1e-9:.6f} s')
-            self.rejoin(at_ns, keep_phase=True)
-            self.rephased_at = now
         self._last_now = now
         windows = []
         while not self.done and self.scheduled_until < now + lead:
@@ -126,24 +124,26 @@ class StrokeStream:
         it re-phased, or None."""
         if window <= self._rephased_after or self.done:
             return None
-        at_ns = round((now + lead) * 1e9)
-        self.rejoin(at_ns, keep_phase=True)
-        self.rephased_at = now
+        at_ns = self.rejoin(now, lead, keep_phase=True)
         return f'window {window} refused by the simulator at {now:.6f} s: rejoined at t = {at_ns * 1e-9:.6f} s'
 
-    def rejoin(self, at_ns: int, *, keep_phase: bool) -> None:
-        """Start the next window at sim time ``at_ns``, ramping over one stroke period from the stroke in force
-        there (whatever the simulator holds: the window has no knot at its stamp) to the waveform's s, ṡ, s̈:
+    def rejoin(self, now: float, lead: float, *, keep_phase: bool) -> int:
+        """At sim time ``now`` (s), start the next window ``lead`` (s) ahead (returned, in ns), ramping
+        over one stroke period from the stroke in force there (whatever the simulator holds: the window has no
+        knot at its stamp) to the waveform's s, ṡ, s̈:
         after the simulator's strokes ran out or refused a window (``keep_phase``: the waveform stays where
         the schedule puts it in sim time; what was missed is skipped and what was refused is made again from
         there, never replayed late) or after sim time went back (a reset, a new simulator: the burst continues
         from where it was sent, with a new origin)."""
+        at_ns = round((now + lead) * 1e9)
+        self.rephased_at = now
         ramp_ns = max(round(self.params.period_s * 1e9), RAMP_MIN_NS)
         self._rephased_after = self.windows_made
         if keep_phase:
             self.sent_ns = max(at_ns + ramp_ns - self.origin_ns, 0)
         self.origin_ns = at_ns + ramp_ns - self.sent_ns
         self._ramp_from = self.sent_ns - ramp_ns
+        return at_ns
 
     def _strokes_through(self, stop_ns: int) -> StrokeParams:
         """The burst's parameters with enough strokes to cover burst time ``stop_ns`` (endless: a count
