@@ -383,6 +383,17 @@ FOUND_CASES = [   # found by the property below, fixed
      'stroke.duty': 0.859375, 'stroke.amplitude': 2e-05, 'stroke.frequency': 1468.0, 'stroke.phases': [0.0],
      'surface.centers': [0.0], 'surface.widths': [0.001], 'particle.x0': 0.0005666510997854919,
      'piezo.enabled': False, 'stream.max_points': 2000, 'stream.window': 0.02, 'surface.thickness': 1e-05},
+    # offline missed a 2.8-µs slip: T_req changed sign twice in one 62-µs stuck step (two kinks of the stick
+    # margin, which dipped between them), and the step ended on a later crossing, whose root the search took
+    # (docs/events.md): both smooth branches are now searched, and a step ending on an event is retaken short
+    {'stroke.waveform': 'raised_cosine', 'stroke.count': 1, 'stroke.pause': 0.0, 'stroke.delay': 0.0,
+     'stroke.duty': 0.5, 'stroke.amplitude': 3.96221490037338e-05, 'stroke.frequency': 2013.0,
+     'stroke.phases': [0.265625, 0.0, 0.21484375, 0.0],
+     'surface.centers': [-0.0006828416109160792, -0.00022761387030535975, 0.00022761387030535975,
+                         0.0006828416109160792],
+     'surface.widths': [0.0011116734452532306, 0.001281186218553395, 0.0005782561820317379, 0.001281186218553395],
+     'particle.x0': -0.0004940214723650181, 'piezo.enabled': False, 'stream.max_points': 2000,
+     'stream.window': 0.02, 'surface.thickness': 0.0},
 ]
 
 

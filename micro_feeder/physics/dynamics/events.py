@@ -134,10 +134,11 @@ def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0:
     margin has at most one local extremum within one step (docs/events.md): a dip longer than the event
     tolerance is found, whatever the step size.
 
-    The stick margin Q_max − |T_req| has one more, a kink (a local maximum), where T_req changes sign: a
-    step over which it does (``t_req0``, ``t_req1``: T_req at the step's ends, ``t_rate0/1`` its rates, NaN
-    where :func:`margin_slopes` has no closed form) is searched on the margin's two smooth branches
-    Q_max ∓ T_req, each with its own values and slopes at both ends (the margin is the lower of them).
+    The stick margin Q_max − |T_req| has kinks (local maxima) where T_req changes sign, and T_req can change
+    sign twice in one step with the margin dipping in between: a stuck step is searched on the margin's two
+    smooth branches Q_max ∓ T_req (``t_req0``, ``t_req1``: T_req at the step's ends, ``t_rate0/1`` its rates,
+    NaN where :func:`margin_slopes` has no closed form), each with its own values and slopes at both ends
+    (the margin is the lower of them, below 0 where either is).
     """
     tol = model.event_tolerance / h
     if tol >= 0.25:
@@ -154,18 +155,18 @@ def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0:
         a0, a1 = margins_at(delta, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux, work, dense)
         t_near_start = aux[AUX_T_REQ]
         start_slope0, start_slope1 = (a0 - g0) / (delta * h), (a1 - g1) / (delta * h)
-    kink = mode == STUCK and t_req0 * t_req1 < 0.0
     if mode == STUCK and math.isnan(t_rate1):
         if math.isnan(t_near_end):
             margins_at(1.0 - delta, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux, work, dense)
             t_near_end = aux[AUX_T_REQ]
         t_rate1 = (t_req1 - t_near_end) / (delta * h)
-    if kink and math.isnan(t_rate0):
+    if mode == STUCK and math.isnan(t_rate0):
         if math.isnan(t_near_start):
             margins_at(delta, mode, direction, t, h, y0, f0, y1, f1, model, src, cur, st, aux, work, dense)
             t_near_start = aux[AUX_T_REQ]
         t_rate0 = (t_near_start - t_req0) / (delta * h)
-    s0 = 1.0 if t_req0 > 0.0 else -1.0       # the sign of T_req where the step starts (kink: -s0 at its end)
+    s0 = 1.0 if t_req0 > 0.0 else -1.0       # the sign of T_req where the step starts, and where it ends
+    s1 = 1.0 if t_req1 > 0.0 else -1.0
     best = 2.0
     for which in range(2):
         start, end = (g0, e0) if which == 0 else (g1, e1)
@@ -177,16 +178,16 @@ def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0:
         if crossed(near_end, strict):           # (NaN, not evaluated, is not crossed)
             best = min(best, 1.0 - delta)
             continue
-        branches = 2 if strict and kink else 1
+        branches = 2 if strict else 1
         for k in range(branches):
             branch = 0.0                        # the margin itself, else the branch Q_max - branch T_req
             v_start, v_end, d_start, d_end = start, end, start_slope, end_slope
-            if branches == 2:                   # the branch the margin starts on, then the one it ends on
+            if branches == 2:                   # the branch the margin starts on, then the other
                 branch = s0 if k == 0 else -s0
                 v_start = start + abs(t_req0) - branch * t_req0
                 v_end = end + abs(t_req1) - branch * t_req1
                 d_start = start_slope + (s0 - branch) * t_rate0
-                d_end = end_slope + (-s0 - branch) * t_rate1
+                d_end = end_slope + (s1 - branch) * t_rate1
             if not (d_start < 0.0 and d_end > 0.0):
                 continue
             if which == 1 and adhesion_floor(mode, t, h, y0, f0, y1, f1, work, dense, model, src, cur) > 0.0:

@@ -359,6 +359,13 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
             if theta < 0.0:
                 status = EVENT_NOT_LOCATED
                 break
+            if dip_search and mode == STUCK and dip_retries < 4 and theta * h > 4.0 * tol:
+                # a root search brackets any of the roots in the step, and a margin can dip past its event
+                # and recover before the root it found: the step is retaken to just short of that root,
+                # where the dip search looks (docs/events.md)
+                h_cap = theta * h - 2.0 * tol
+                dip_retries += 1
+                continue
             if not moving:
                 copy_into(y1, y)
             elif adaptive and mode == SLIDING and which == 0:
