@@ -270,9 +270,11 @@ def test_resim_decodes_each_message_once(stepped_log: Path, monkeypatch: pytest.
     assert 0 < decoded[0] <= created[0]
 
 
-def _jittered_log(path: Path, offset: float = 0.0) -> None:
+def _jittered_log(path: Path, offset: float = 0.0, lag_ns: float = 0.0, settings: dict[str, Any] | None = None
+                  ) -> None:
     """Poses at wall-clock-like stamps (not sums of step periods), at the defaults' resting motion
-    (no command), re-simulated exactly when ``offset`` is 0."""
+    (no command; ``settings`` on top), re-simulated exactly when ``offset`` and ``lag_ns`` are 0; each pose is
+    taken ``lag_ns`` after its stamp, as a real-time stop known to 1 ns can be, and moved ``offset`` (m)."""
     from geometry_msgs.msg import PoseStamped
     from rclpy.serialization import serialize_message
 
@@ -280,11 +282,11 @@ def _jittered_log(path: Path, offset: float = 0.0) -> None:
     from micro_feeder.settings import model_specs
     from micro_feeder.sim.stepper import Stepper, build_model
 
-    stepper = Stepper(build_model({name: default for name, (_, default) in model_specs().items()}))
+    stepper = Stepper(build_model({name: default for name, (_, default) in model_specs().items()} | (settings or {})))
     writer = LogWriter(path)
     writer.add_topic('/particle/pose', 'geometry_msgs/msg/PoseStamped')
     for ns in (1_000_370, 2_001_020, 3_000_910):
-        stepper.advance(ns / 1e9)
+        stepper.advance((ns + lag_ns) / 1e9)
         obs = stepper.observe()
         msg = PoseStamped()
         msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(ns, 1_000_000_000)
@@ -301,6 +303,25 @@ def test_real_time_note_only_with_a_difference(tmp_path: Path) -> None:
     _jittered_log(tmp_path / 'off', offset=1e-12)
     report = resimulate(LogReader(tmp_path / 'off'))
     assert not report.identical and any('real-time run' in note for note in report.notes), report.notes
+
+
+def test_a_real_time_difference_the_rounded_stop_times_explain_matches(tmp_path: Path) -> None:
+    """A pose taken 0.9 ns after its stamp (a real-time stop known to 1 ns) of a part sliding at ~0.16 m/s
+    differs by ~1.4e-10 m, beyond integration.tolerance, and matches: its speed x 1 ns covers it; a 1e-9 m
+    difference beyond that does not."""
+    from micro_feeder.cli.resim import matches, verdict
+
+    sliding = {'particle.v0': 0.2}
+    _jittered_log(tmp_path / 'late', lag_ns=0.9, settings=sliding)
+    report = resimulate(LogReader(tmp_path / 'late'), sliding)
+    assert not report.exact_stop_times and 1.2e-10 < report.max_error < 1.8e-10, report.verdict()
+    assert report.max_unexplained <= 0.0 and matches(report, 1e-10)
+    line = verdict(report, 1e-10, 'integration.tolerance')
+    assert line.startswith('resim: MATCHES within 1.') and "speed x 1 ns" in line, line
+    _jittered_log(tmp_path / 'off', offset=1e-9, lag_ns=0.9, settings=sliding)
+    report = resimulate(LogReader(tmp_path / 'off'), sliding)
+    assert report.max_unexplained > 7e-10 and not matches(report, 1e-10), report.verdict()
+    assert verdict(report, 1e-10, 'x').startswith('resim: DIFFERENT')
 
 
 def test_resim_refuses_non_model_overrides(stepped_log: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -28,7 +28,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     add_model_options(parser)
     parser.add_argument('--json', action='store_true', help='print the report as JSON')
     parser.add_argument('--tolerance', type=float, metavar='M',
-                        help='exit with status 1 when the largest difference exceeds M metres; the verdict says '
+                        help='exit with status 1 when the largest difference exceeds M metres (in a real-time '
+                             'log, beyond the part\'s speed x 1 ns, its stop times\' rounding); the verdict says '
                              '"MATCHES within" a difference up to M (default M for the verdict: the run\'s '
                              'integration.tolerance, the position error its integrator allows per step)')
     parser.set_defaults(func=run)
@@ -52,14 +53,22 @@ def _tolerance(given: float | None, log: Any, overrides: dict[str, Any]) -> tupl
     return float(value), f'{name}: the position error the integrator allows per step'
 
 
+def matches(report: Any, tolerance: float) -> bool:
+    """Whether the runs agree within ``tolerance`` (m): every pose, or in a real-time log (stop times known
+    to 1 ns) every pose beyond what its stop time's rounding moves the part (speed × 1 ns)."""
+    return report.max_error <= tolerance or (not report.exact_stop_times and report.max_unexplained <= tolerance)
+
+
 def verdict(report: Any, tolerance: float, source: str) -> str:
     """The report's verdict, with "MATCHES within X (tolerance Y ...)" for a difference within the tolerance
     (the exact figures kept)."""
     line = report.verdict()
-    if report.identical or not report.max_error <= tolerance:
+    if report.identical or not matches(report, tolerance):
         return line
     detail = line.split(': ', 2)[2]     # after 'resim: DIFFERENT: '
-    return f'resim: MATCHES within {report.max_error:.2g} m (tolerance {tolerance:g} m, {source}): {detail}'
+    rounding = '' if report.max_error <= tolerance else \
+        ', plus the part\'s speed x 1 ns: the real-time stop times are known to 1 ns'
+    return f'resim: MATCHES within {report.max_error:.2g} m (tolerance {tolerance:g} m, {source}{rounding}): {detail}'
 
 
 def run(args: argparse.Namespace) -> int:
@@ -86,12 +95,12 @@ def run(args: argparse.Namespace) -> int:
     tolerance, source = _tolerance(args.tolerance, log, overrides)
     if args.json:
         print(json.dumps({**report.as_dict(), 'tolerance': tolerance, 'tolerance_source': source,
-                          'matches': report.max_error <= tolerance}, indent=2))
+                          'matches': matches(report, tolerance)}, indent=2))
     else:
         print(verdict(report, tolerance, source))
         for note in report.notes:
             print(f'  note: {note}')
     report_loss(log)
-    if args.tolerance is not None and not report.max_error <= args.tolerance:
+    if args.tolerance is not None and not matches(report, args.tolerance):
         return 1
     return 0
