@@ -36,8 +36,8 @@ REAL_TIME_NOTE = (
     'real-time run: the simulator stopped at sums of elapsed wall times x real_time_factor, which the stamps give '
     'rounded to 1 ns, so the re-simulation stops within 1 ns of them, not bit for bit; between commands it takes '
     'the same integration steps (a stop does not cut a step), but each pose is evaluated up to 1 ns off on a '
-    'moving surface, and a difference at the 1e-14 m level (4.8e-14 m in z, x identical, measured over a 20-slip '
-    'run) comes from this, not from the commands or the model')
+    'moving surface: a difference up to the part\'s speed x 1 ns (4.8e-14 m in z over a 20-slip run, 1.6e-10 m in z '
+    'on a stuck part riding the surface in a 10-minute run) comes from this, not from the commands or the model')
 
 class ResimError(ValueError):
     """The log cannot be re-simulated (no poses, parameters that build no model ...); says why."""
