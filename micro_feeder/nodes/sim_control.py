@@ -49,6 +49,7 @@ from ..interface import stamps
 from ..interface.messages import tilt_quaternion
 from ..interface.names import FEEDER_FRAME, part_entity
 from ..physics.dynamics import Observation
+from ..sim.engine import Busy
 from ._ros import SERVICE_QOS
 
 # Feedback comes every step: a deep history, so a client with the same depth misses none (default depth 10)
@@ -84,10 +85,6 @@ CUSTOM_INFO = ('micro_feeder simulator: entities part_0, part_1, ... (one per pa
                'Commands: '
                'control_msgs/action/FollowJointTrajectory ~/follow_joint_trajectory, actuator/trajectory. '
                'See docs/interface.md.')
-
-
-class Busy(Exception):
-    """The simulator's lock could not be taken in time: a tick (or a large command) is still working."""
 
 
 class ControlledSimulator(Protocol):

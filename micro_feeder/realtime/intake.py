@@ -11,7 +11,7 @@ the same batch starts at or before its start, because that one replaces everythi
 
 Bounds: a message larger than ``max_message_bytes`` is refused on arrival, unparsed; the queue holds at
 most ``max_queued_bytes`` of messages (the oldest are dropped, counted, beyond that). Nothing here knows
-ROS: the node passes in how to parse and apply.
+ROS: the simulator's engine passes in how to parse and apply.
 """
 
 from __future__ import annotations
