@@ -326,19 +326,20 @@ class Actuator(Node):
             self.goals.destroy()
         super().destroy_node()
 
-    def state(self) -> str:
-        """What the node is doing, in words: for /diagnostics and people."""
+    def state(self, reached: bool | None = None) -> str:
+        """What the node is doing, in words: for /diagnostics and people (``reached``: whether a simulator is
+        reached on actuator/trajectory, when the caller has just asked the graph)."""
         if self._auto is not None:
             return 'waiting for the simulator (auto_start)'
         if self.goals is not None:
             return f'goal {self.goals.state}' if self.goals.sent else 'idle'
         if self._pending_stream:
             return 'streaming: waiting for sim time on actuator/joint_states'
-        if self._stream is not None and not self._simulator_subscriptions():
+        if self._stream is None:
+            return 'idle'
+        if not (bool(self._simulator_subscriptions()) if reached is None else reached):
             return 'streaming: no simulator reached on actuator/trajectory, waiting for one'
-        if self._stream is not None:
-            return f'streaming, {self.rephases} re-phase(s)' if self.rephases else 'streaming'
-        return 'idle'
+        return f'streaming, {self.rephases} re-phase(s)' if self.rephases else 'streaming'
 
     def _on_start(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         try:
@@ -361,9 +362,10 @@ class Actuator(Node):
         return SetParametersResult(successful=reason is None, reason=reason or '')
 
     def _publish_diagnostics(self) -> None:
-        items = {'state': self.state(), 'bursts_sent': self.bursts, 'stops_sent': self.stops,
+        reached = bool(self._simulator_subscriptions())
+        items = {'state': self.state(reached), 'bursts_sent': self.bursts, 'stops_sent': self.stops,
                  'windows_sent': self.windows, 'stream_underruns': self.underruns, 'stream_rephases': self.rephases,
-                 'simulator_reached': bool(self._simulator_subscriptions()),
+                 'simulator_reached': reached,
                  'last_rephase': self.last_rephase,
                  'last_rephase_at': _seconds_text(getattr(self._stream, 'rephased_at', None)),
                  'streaming': self._stream is not None, 'subscribers': self._pub.get_subscription_count(),

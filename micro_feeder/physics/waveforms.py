@@ -251,6 +251,61 @@ def channel_bounds(src: tuple, k: int, j: int, i: int, t0: float, t1: float) -> 
     return s_max, sd_max, sdd_max
 
 
+@jit_inline
+def channel_ranges(src: tuple, k: int, j: int, i: int, t0: float, t1: float) -> tuple[float, float, float, float]:
+    """Bounds (s_lo, s_hi, s̈_lo, s̈_hi) of s (m) and s̈ (m/s²) of channel ``k`` on segment (j, i) (as
+    :func:`channel_value` evaluates it) for every t in [t0, t1]: each polynomial term's range (τⁿ is monotone
+    on either side of 0) plus each trigonometric term's exact range, its values at the ends or ±R where
+    its rate changes sign in between (R its amplitude; s̈'s term is −ω² times s's), or ±R over a window of
+    half its period or more."""
+    _, _, _, before, after, _, seg_coef, _ = src
+    if j < 0:
+        held = before[k] if j == -1 else after[k]
+        return held, held, 0.0, 0.0
+    tau0 = segment_time(src, k, j, i, t0)
+    tau1 = segment_time(src, k, j, i, t1)
+    c = seg_coef[k, i]
+    straddles = tau0 < 0.0 < tau1
+    s_lo = s_hi = c[0]
+    sdd_lo = sdd_hi = 2.0 * c[2]
+    p0 = p1 = 1.0                                     # tau0^n, tau1^n from n = 1
+    for n in range(1, 6):
+        p0 *= tau0
+        p1 *= tau1
+        for order in (0, 2):
+            if n + order > 5 or c[n + order] == 0.0:
+                continue
+            a = c[n] if order == 0 else (n + 2) * (n + 1) * c[n + 2]
+            v0, v1 = a * p0, a * p1
+            lo, hi = min(v0, v1), max(v0, v1)
+            if straddles:
+                lo, hi = min(lo, 0.0), max(hi, 0.0)
+            if order == 0:
+                s_lo, s_hi = s_lo + lo, s_hi + hi
+            else:
+                sdd_lo, sdd_hi = sdd_lo + lo, sdd_hi + hi
+    for h in range(N_TRIG):
+        base = N_POLY + 3 * h
+        cc, ss, w = c[base], c[base + 1], c[base + 2]
+        if cc == 0.0 and ss == 0.0:
+            continue
+        if abs(w) * (tau1 - tau0) >= math.pi:
+            lo = -math.hypot(cc, ss)
+            hi = -lo
+        else:
+            cos0, sin0, cos1, sin1 = math.cos(w * tau0), math.sin(w * tau0), math.cos(w * tau1), math.sin(w * tau1)
+            v0, v1 = cc * cos0 + ss * sin0, cc * cos1 + ss * sin1
+            lo, hi = min(v0, v1), max(v0, v1)
+            rate0, rate1 = w * (ss * cos0 - cc * sin0), w * (ss * cos1 - cc * sin1)
+            if rate0 > 0.0 >= rate1:                  # a maximum in between
+                hi = math.hypot(cc, ss)
+            elif rate0 < 0.0 <= rate1:                # a minimum
+                lo = -math.hypot(cc, ss)
+        s_lo, s_hi = s_lo + lo, s_hi + hi
+        sdd_lo, sdd_hi = sdd_lo - w * w * hi, sdd_hi - w * w * lo
+    return s_lo, s_hi, sdd_lo, sdd_hi
+
+
 @jit
 def sample_into(src: tuple, times: np.ndarray, out: np.ndarray) -> None:
     """``out`` (3, times, channels): s (m), ṡ (m/s), s̈ (m/s²) of every channel of ``src`` at ``times`` (s),

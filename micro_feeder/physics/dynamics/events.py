@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from .._jit import jit, jit_inline
-from ..waveforms import channel_bounds
+from ..waveforms import channel_bounds, channel_ranges
 from .layout import (
     AUX_L,
     AUX_MAT_VX,
@@ -138,7 +138,9 @@ def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0:
     sign twice in one step with the margin dipping in between: a stuck step is searched on the margin's two
     smooth branches Q_max ∓ T_req (``t_req0``, ``t_req1``: T_req at the step's ends, ``t_rate0/1`` its rates,
     NaN where :func:`margin_slopes` has no closed form), each with its own values and slopes at both ends
-    (the margin is the lower of them, below 0 where either is).
+    (the margin is the lower of them, below 0 where either is). The other branch's search is skipped where
+    T_req provably keeps its sign over the step (:func:`required_friction_keeps_sign`, asked only when that
+    branch's slopes call for a search): the margin is then one smooth branch.
     """
     tol = model.event_tolerance / h
     if tol >= 0.25:
@@ -190,6 +192,8 @@ def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0:
                 d_end = end_slope + (s1 - branch) * t_rate1
             if not (d_start < 0.0 and d_end > 0.0):
                 continue
+            if k == 1 and t_req0 * t_req1 >= 0.0 and required_friction_keeps_sign(t, h, y0, model, src, cur):
+                continue                        # no kink: the margin is the branch searched first
             if which == 1 and adhesion_floor(mode, t, h, y0, f0, y1, f1, work, dense, model, src, cur) > 0.0:
                 continue                        # the adhesion margin cannot reach 0 in this step
             seed = dip_seed(v_start, v_end, d_start * h, d_end * h, tol)
@@ -198,6 +202,47 @@ def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0:
             if 0.0 < theta < best:
                 best = theta
     return (best if best <= 1.0 else -1.0), end_slope0, end_slope1, t_rate1
+
+
+@jit_inline
+def required_friction_keeps_sign(t: float, h: float, y0: np.ndarray, model: KernelModel, src: tuple,
+                                 cur: np.ndarray) -> bool:
+    """True where T_req = N h_x provably never changes sign over the stuck step [t, t + h] of a part held
+    at rest at x = ``y0[0]`` on the bump surface (it may touch 0); False where that is not derived (the
+    piezo model, a base, a track, a thick surface). Then the stick margin Q_max − |T_req| is its smooth
+    branch Q_max − s T_req over the whole step (no kink to hide a dip, and a root search's root is its only
+    one) and the other branch, Q_max + |T_req| ≥ Q_max ≥ 0, needs no search.
+
+    At rest, N = m (h_tt + g) / L and h_x = Σ s_k g_k'(x): each keeps its sign where its range over the
+    step, from each felt actuator's range of s_k and s̈_k (:func:`channel_ranges`) times its bump g_k and
+    g_k' at x, lies on one side of 0 (:func:`one_sided`).
+    """
+    if model.piezo or model.has_base or model.track or model.half_thickness > 0.0 or y0[1] != 0.0:
+        return False
+    x = y0[0]
+    hx_lo = hx_hi = 0.0
+    acc_lo = acc_hi = model.gravity
+    lo, hi = felt_range(model, x, model.cutoff_radius * model.max_width)
+    for k in range(lo, hi):
+        w = model.widths[k]
+        u = (x - model.centers[k]) / w
+        if abs(u) > model.cutoff_radius:
+            continue
+        g = math.exp(-0.5 * u * u)
+        slope = -u / w * g
+        s_lo, s_hi, sdd_lo, sdd_hi = channel_ranges(src, k, cur[k, 0], cur[k, 1], t, t + h)
+        hx_lo += min(slope * s_lo, slope * s_hi)
+        hx_hi += max(slope * s_lo, slope * s_hi)
+        acc_lo += g * sdd_lo
+        acc_hi += g * sdd_hi
+    return one_sided(hx_lo, hx_hi) and one_sided(acc_lo, acc_hi)
+
+
+@jit_inline
+def one_sided(lo: float, hi: float) -> bool:
+    """A range [lo, hi] on one side of 0 (touching it allowed, to 1e-9 of its size for rounding)."""
+    slack = 1e-9 * (hi - lo)
+    return lo >= -slack or hi <= slack
 
 
 @jit_inline

@@ -13,7 +13,15 @@ import math
 import numpy as np
 
 from .._jit import jit
-from .events import first_dip, locate_root, material_jump, threshold_decision, transition
+from .events import (
+    adhesion_floor,
+    first_dip,
+    locate_root,
+    material_jump,
+    required_friction_keeps_sign,
+    threshold_decision,
+    transition,
+)
 from .layout import (
     AUX_GAP,
     AUX_H,
@@ -359,10 +367,15 @@ def advance(y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, t_
             if theta < 0.0:
                 status = EVENT_NOT_LOCATED
                 break
-            if dip_search and mode == STUCK and dip_retries < 4 and theta * h > 4.0 * tol:
+            if (dip_search and mode == STUCK and dip_retries < 4 and theta * h > 4.0 * tol
+                    and not (which == 0 and not hit1 and t_req0 * t_req1 >= 0.0
+                             and required_friction_keeps_sign(t, h, y, model, src, cur)
+                             and adhesion_floor(mode, t, h, y, f0, y1, f1, work, error_control, model, src,
+                                                cur) > 0.0)):
                 # a root search brackets any of the roots in the step, and a margin can dip past its event
                 # and recover before the root it found: the step is retaken to just short of that root,
-                # where the dip search looks (docs/events.md)
+                # where the dip search looks (docs/events.md); not needed for the stick margin's root where
+                # T_req keeps its sign (no kink: its one root) and the adhesion margin provably stays above 0
                 h_cap = theta * h - 2.0 * tol
                 dip_retries += 1
                 continue
