@@ -73,7 +73,8 @@ def loop_status(s: LoopSnapshot) -> LoopStatus:
         level, message = WARN, (f'command source silent: the streamed strokes ran out {s.stream_silent:.3f} s of '
                                 f'sim time ago (last command {s.command_age:.1f} s ago, wall); strokes held')
     elif lagging:
-        level, message = WARN, 'behind real time: the physics cannot keep up'
+        level, message = WARN, (f'behind real time ({s.achieved_rtf:.3f} x): the ticks\' work (physics and '
+                                f'publishing, tick_compute_p99_ms {_pct(s.busy_ms, 99)}) or a busy CPU')
     else:
         level = OK
         message = 'lockstep' if s.lockstep else 'paused' if s.paused else 'running'
