@@ -7,6 +7,7 @@ import shutil
 import signal
 import subprocess
 import sys
+import time
 from collections import defaultdict
 from pathlib import Path
 from typing import Any
@@ -85,8 +86,8 @@ def start_process(name: str, *ros_args: str) -> subprocess.Popen:
 
 
 def stop_process(proc: subprocess.Popen) -> tuple[int, str]:
-    """SIGINT and wait (SIGKILL after 20 s): (exit status, -9 when killed; output). Stopping it again gives
-    the same answer (its output is read once)."""
+    """SIGINT and wait (SIGKILL after 20 s, after SIGUSR1 for its threads' stacks): (exit status, -9 when
+    killed; output). Stopping it again gives the same answer (its output is read once)."""
     stopped = getattr(proc, 'stopped', None)
     if stopped is not None:
         return stopped
@@ -95,7 +96,9 @@ def stop_process(proc: subprocess.Popen) -> tuple[int, str]:
     try:
         out, _ = proc.communicate(timeout=20)
         proc.stopped = (proc.returncode, out)
-    except subprocess.TimeoutExpired:
+    except subprocess.TimeoutExpired:         # stuck: its threads' stacks (SIGUSR1, StopFlag) go with its output
+        proc.send_signal(signal.SIGUSR1)
+        time.sleep(1.0)
         proc.kill()
         out, _ = proc.communicate()
         proc.stopped = (-9, out)

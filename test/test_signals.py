@@ -59,6 +59,25 @@ def test_a_running_node_stops_within_a_second(ros_context: Context, tmp_path: Pa
     assert 'Traceback' not in out, out
 
 
+def test_sigusr1_prints_every_threads_stack_and_the_node_runs_on(ros_context: Context, tmp_path: Path) -> None:
+    """What a test (node_helpers.stop_process) or a person gets from a process that does not stop: where each
+    thread is, and the process keeps running until it is stopped."""
+    namespace = f'/usr1_{tmp_path.name.replace("-", "_")}'
+    proc = _start('recorder', tmp_path, namespace)
+    graph = Node('graph', context=ros_context)
+    try:
+        wait_until(lambda: ('recorder', namespace) in graph.get_node_names_and_namespaces(), 120,
+                   what=f'{namespace}/recorder in the graph')
+        proc.send_signal(signal.SIGUSR1)
+        time.sleep(1.0)
+        assert proc.poll() is None
+    finally:
+        graph.destroy_node()
+        code, out = stop_process(proc)
+    assert code == 0, out
+    assert out.count('(most recent call first)') >= 2 and 'spin_until' in out, out
+
+
 @pytest.mark.parametrize('name', NODES)
 def test_ctrl_c_during_start_up_is_quiet(tmp_path: Path, name: str) -> None:
     proc = _start(name, tmp_path)

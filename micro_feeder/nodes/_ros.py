@@ -10,6 +10,7 @@ handlers and spins in slices of ``SPIN_SLICE`` seconds, checking a stop flag in 
 
 from __future__ import annotations
 
+import faulthandler
 import importlib
 import os
 import signal
@@ -63,8 +64,12 @@ class StopFlag:
         self.requested = False
 
     def install(self) -> StopFlag:
+        """Take SIGINT and SIGTERM; SIGUSR1 then prints every thread's Python stack to stderr (from C, so
+        also while the main thread is blocked in the middleware): a process that does not stop says where
+        it is."""
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, self._handle)
+        faulthandler.register(signal.SIGUSR1, all_threads=True)
         return self
 
     def _handle(self, signum: int, _frame: Any) -> None:
