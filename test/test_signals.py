@@ -75,7 +75,7 @@ def test_sigusr1_prints_every_threads_stack_and_the_node_runs_on(ros_context: Co
         graph.destroy_node()
         code, out = stop_process(proc)
     assert code == 0, out
-    assert out.count('(most recent call first)') >= 2 and 'spin_until' in out, out
+    assert out.count('(most recent call first)') >= 2 and 'micro_feeder/nodes/recorder.py' in out, out
 
 
 @pytest.mark.parametrize('name', NODES)

@@ -10,10 +10,12 @@ handlers and spins in slices of ``SPIN_SLICE`` seconds, checking a stop flag in 
 
 from __future__ import annotations
 
+import contextlib
 import faulthandler
 import importlib
 import os
 import signal
+import sys
 from collections.abc import Callable
 from typing import Any
 
@@ -69,7 +71,10 @@ class StopFlag:
         it is."""
         for sig in (signal.SIGINT, signal.SIGTERM):
             signal.signal(sig, self._handle)
-        faulthandler.register(signal.SIGUSR1, all_threads=True)
+        stderr = sys.__stderr__                 # the process's own: sys.stderr may be a capture with no file
+        if stderr is not None:
+            with contextlib.suppress(OSError, ValueError, AttributeError):      # no file descriptor
+                faulthandler.register(signal.SIGUSR1, file=stderr, all_threads=True)
         return self
 
     def _handle(self, signum: int, _frame: Any) -> None:
