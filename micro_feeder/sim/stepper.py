@@ -101,7 +101,7 @@ class Stepper:
 
     @property
     def n_parts(self) -> int:
-        return len(self.parts_state.parts)
+        return len(self.parts_state)
 
     @property
     def t(self) -> float:
@@ -153,7 +153,7 @@ class Stepper:
         part = self.model.initial_state(x, 0.0)
         part.y[4:] = like.y[4:]                     # the piezo stacks' state: the surface's, shared by every part
         part.fs[layout.FS_T] = like.fs[layout.FS_T]
-        self.parts_state.parts.insert(index, part)
+        self.parts_state.insert(index, part)
         self.entity_names.insert(index, name)
         self._parts_changed()
         return index
@@ -166,7 +166,8 @@ class Stepper:
         if self.n_parts == 1:
             raise ValueError(f'{name} is the last part: the simulator keeps at least one')
         index = self.entity_names.index(name)
-        del self.parts_state.parts[index], self.entity_names[index]
+        self.parts_state.remove(index)
+        del self.entity_names[index]
         self._parts_changed()
         return index
 

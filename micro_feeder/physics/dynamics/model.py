@@ -36,7 +36,7 @@ from ..waveforms import StrokeParams, StrokeSchedule, StrokeTable, stack_tables,
 from . import kernel as k
 from . import layout
 from .conveying import ConveyingWindow, throw_number
-from .event_list import MODES, TRANSITION_KINDS, EventList
+from .event_list import MODES, NO_EVENTS, TRANSITION_KINDS, EventList
 from .params import LANDING_LAWS, DetachParams, IntegrationParams, LandingParams
 
 
@@ -158,6 +158,51 @@ class FeederState:
     def transitions(self) -> dict[str, int]:
         """Counters ``stick_to_slip``, ``slip_to_stick``, ``take_off``, ``landing`` (docs/dynamics.md §1)."""
         return {name: int(self.iv[idx]) for name, idx in zip(TRANSITION_KINDS, layout.COUNTERS, strict=True)}
+
+
+class StateRows:
+    """Several parts' states (all at one sim time) as the rows of four arrays: what one compiled call advances
+    (:meth:`FeederModel.advance_rows`). ``ons`` and ``x0`` hold each row's ``ahead_on`` and ``x0``.
+
+    :meth:`views` gives one :class:`FeederState` per row whose arrays are that row: a change made through a
+    view (a velocity set at an impact, a part moved) is a change of the rows."""
+
+    __slots__ = ('ahead', 'fs', 'iv', 'ons', 'x0', 'y')
+
+    def __init__(self, y: np.ndarray, iv: np.ndarray, fs: np.ndarray, ahead: np.ndarray, ons: list[tuple],
+                 x0: list[float]):
+        self.y, self.iv, self.fs, self.ahead, self.ons, self.x0 = y, iv, fs, ahead, ons, x0
+
+    @classmethod
+    def of(cls, states: Sequence[FeederState]) -> StateRows:
+        """Rows holding copies of ``states``."""
+        return cls(np.stack([s.y for s in states]), np.stack([s.iv for s in states]),
+                   np.stack([s.fs for s in states]), np.stack([s.ahead for s in states]),
+                   [s.ahead_on for s in states], [s.x0 for s in states])
+
+    def __len__(self) -> int:
+        return self.y.shape[0]
+
+    @property
+    def t(self) -> float:
+        """Sim time (s)."""
+        return float(self.fs[0, layout.FS_T])
+
+    def copy(self) -> StateRows:
+        """Independent rows (to branch a run)."""
+        return StateRows(self.y.copy(), self.iv.copy(), self.fs.copy(), self.ahead.copy(), list(self.ons),
+                         list(self.x0))
+
+    def view(self, p: int) -> FeederState:
+        """Row ``p`` as a :class:`FeederState` sharing its arrays."""
+        state = FeederState.__new__(FeederState)
+        state.y, state.iv, state.fs, state.ahead = self.y[p], self.iv[p], self.fs[p], self.ahead[p]
+        state.ahead_on, state.x0 = self.ons[p], self.x0[p]
+        return state
+
+    def views(self) -> list[FeederState]:
+        """Every row as a :class:`FeederState` sharing its arrays."""
+        return [self.view(p) for p in range(len(self))]
 
 
 @dataclass(frozen=True)
@@ -406,27 +451,34 @@ class FeederModel:
         flight) at its start, its step ends and its events, and the distance along x between its start, its
         events and its end (m): how far it may have gone in between (docs/parts.md). Each copy's
         ``max_speed`` keeps its run's largest as before."""
-        n = len(states)
-        ys = np.stack([s.y for s in states])
+        advanced = self.advance_rows(StateRows.of(states), t_target, source)
+        return PartsAdvance(advanced.rows.views(), [advanced.events.get(p, NO_EVENTS) for p in range(len(states))],
+                            advanced.peak_speed, advanced.path)
+
+    def advance_rows(self, rows: StateRows, t_target: float,
+                     source: StrokeTable | StrokeSchedule | None = None) -> RowsAdvance:
+        """:meth:`advance_copies` on rows: new rows (``rows`` are left as they were), the events of the rows that
+        had some (by row), each row's largest |ẋ| and distance along x (m)."""
+        n = len(rows)
+        ys, ivs, fss, aheads = rows.y.copy(), rows.iv.copy(), rows.fs.copy(), rows.ahead.copy()
         if ys.shape[1] != 4 + 2 * self._n_stacks:
-            self._check_state(states[0])
-        ivs = np.stack([s.iv for s in states])
-        fss = np.stack([s.fs for s in states])
-        aheads = np.stack([s.ahead for s in states])
+            self._check_state(rows.view(0))
         run_max = fss[:, layout.FS_MAX_SPEED].copy()
         fss[:, layout.FS_MAX_SPEED] = np.abs(ys[:, 1])
         running = np.ones(n, dtype=np.bool_)
         status = np.zeros(n, dtype=np.int64)
         path = np.zeros(n)
-        ons = [s.ahead_on for s in states]
-        collected: list[list[EventList]] = [[] for _ in range(n)]
+        ons = list(rows.ons)
+        collected: dict[int, list[EventList]] = {}
         for t_until, t_limit, table in self._segments(float(fss[0, layout.FS_T]), t_target, source):
             src = self._source_table(table).as_tuple()
             work = _WORK.arrays(ys.shape[1], src[0].size)
-            for p, on in enumerate(ons):
+            on_now = (self, table, t_limit)
+            for p, (on, go) in enumerate(zip(ons, running.tolist(), strict=True)):
                 if not (on and on[0] is self and on[1] is table and on[2] == t_limit):
                     fss[p, layout.FS_AHEAD_T1] = math.nan      # taken on another model or source: not valid
-            ons = [(self, table, t_limit) if go else on for go, on in zip(running.tolist(), ons, strict=True)]
+                if go:                                          # not a row left for the fallback below
+                    ons[p] = on_now
             counts = np.zeros(n, dtype=np.int64)
             n_ev = k.advance_parts(ys, ivs, fss, aheads, running, status, t_until, t_limit, self._kernel_model, src,
                                    work.batch_ev_i, work.batch_ev_f, counts, path,
@@ -435,24 +487,21 @@ class FeederModel:
             if n_ev:
                 ends = np.cumsum(counts)
                 for p in np.flatnonzero(counts).tolist():
-                    collected[p].append(EventList(work.batch_ev_i[ends[p] - counts[p]:ends[p]].copy(),
-                                                  work.batch_ev_f[ends[p] - counts[p]:ends[p]].copy()))
-        copies = []
-        for p, state in enumerate(states):
-            copy = FeederState.__new__(FeederState)
-            copy.y, copy.iv, copy.fs, copy.ahead = ys[p], ivs[p], fss[p], aheads[p]
-            copy.ahead_on, copy.x0 = ons[p], state.x0
-            copies.append(copy)
-            if status[p] not in (layout.DONE, layout.EVENTS_FULL):
+                    collected.setdefault(p, []).append(EventList(work.batch_ev_i[ends[p] - counts[p]:ends[p]].copy(),
+                                                                 work.batch_ev_f[ends[p] - counts[p]:ends[p]].copy()))
+        advanced = StateRows(ys, ivs, fss, aheads, ons, list(rows.x0))
+        for p in np.flatnonzero(status != layout.DONE).tolist():
+            copy = advanced.view(p)
+            if status[p] != layout.EVENTS_FULL:
                 raise SimulationError(self._failure(int(status[p]), copy))
-            if status[p] == layout.EVENTS_FULL:                 # too many events to batch: on alone
-                x_last = copy.x
-                rest, _ = self._integrate(copy, t_target, source, record=False)
-                path[p] += np.abs(np.diff([x_last, *rest.x, copy.x])).sum()
-                collected[p].append(rest)
+            x_last = copy.x                                 # too many events to batch: on alone
+            rest, _ = self._integrate(copy, t_target, source, record=False)
+            advanced.ons[p] = copy.ahead_on
+            path[p] += np.abs(np.diff([x_last, *rest.x, copy.x])).sum()
+            collected.setdefault(p, []).append(rest)
         peak = fss[:, layout.FS_MAX_SPEED].copy()
         fss[:, layout.FS_MAX_SPEED] = np.maximum(run_max, peak)
-        return PartsAdvance(copies, [EventList.concatenate(e) for e in collected], peak, path)
+        return RowsAdvance(advanced, {p: EventList.concatenate(e) for p, e in collected.items()}, peak, path)
 
     def settle(self, state: FeederState, source: StrokeTable | StrokeSchedule | None = None,
                max_time: float | None = None, step: float | None = None) -> EventList:
@@ -625,6 +674,16 @@ class PartsAdvance(NamedTuple):
 
     states: list[FeederState]
     events: list[EventList]
+    peak_speed: np.ndarray
+    path: np.ndarray
+
+
+class RowsAdvance(NamedTuple):
+    """What :meth:`FeederModel.advance_rows` returns: the advanced rows, the events of the rows that had some
+    (by row index), each row's largest |ẋ| (m/s) and distance along x between its start, events and end (m)."""
+
+    rows: StateRows
+    events: dict[int, EventList]
     peak_speed: np.ndarray
     path: np.ndarray
 

@@ -26,6 +26,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 from ..dynamics import MODES, EventList, FeederModel, FeederState, SimulationError
+from ..dynamics.model import StateRows
 from ..waveforms import StrokeSchedule, StrokeTable
 from .impacts import common_velocity, newton_impact, packed_positions, pooled_velocities
 
@@ -52,22 +53,62 @@ class Impact(NamedTuple):
 
 class PartsState:
     """The parts' states (one :class:`FeederState` each, in order along the feeder, all at one sim time), the
-    impacts so far and the chunk length to try next."""
+    impacts so far and the chunk length to try next.
+
+    The states are kept as the rows of one :class:`~micro_feeder.physics.dynamics.model.StateRows` between
+    chunks (one compiled call advances them all); :attr:`parts` are views of those rows, so changing a part
+    changes the rows. Add and remove parts with :meth:`insert` and :meth:`remove`, not on the list."""
 
     def __init__(self, parts: Sequence[FeederState]):
-        self.parts = list(parts)
+        self._parts: list[FeederState] | None = list(parts)
+        self._rows: StateRows | None = None
         self.impacts: list[Impact] = []
         self.chunk_hint = 0.0
 
     @property
+    def parts(self) -> list[FeederState]:
+        """Every part's state, in order along the feeder."""
+        if self._parts is None:
+            self._parts = self._rows.views()
+        return self._parts
+
+    @property
+    def rows(self) -> StateRows:
+        """The parts as rows (:attr:`parts` become views of them)."""
+        rows, parts = self._rows, self._parts
+        if rows is None or (parts is not None and len(parts) != len(rows)):
+            rows = self._rows = StateRows.of(parts)
+            self._parts = rows.views()
+        elif parts is not None:
+            rows.ons[:] = [part.ahead_on for part in parts]   # a part advanced on its own keeps what it was on
+        return rows
+
+    def take(self, rows: StateRows) -> None:
+        """Make ``rows`` the parts' states."""
+        self._rows, self._parts = rows, None
+
+    def insert(self, index: int, part: FeederState) -> None:
+        """Add ``part`` at ``index`` (its place along the feeder)."""
+        self.parts.insert(index, part)
+        self._rows = None
+
+    def remove(self, index: int) -> None:
+        """Remove part ``index``."""
+        del self.parts[index]
+        self._rows = None
+
+    def __len__(self) -> int:
+        return len(self._rows) if self._parts is None else len(self._parts)
+
+    @property
     def t(self) -> float:
         """Sim time (s)."""
-        return self.parts[0].t
+        return self._rows.t if self._parts is None else self._parts[0].t
 
     @property
     def positions(self) -> np.ndarray:
         """Every part's x (m)."""
-        return np.array([part.x for part in self.parts])
+        return self._rows.y[:, 0].copy() if self._parts is None else np.array([part.x for part in self._parts])
 
     @property
     def velocities(self) -> np.ndarray:
@@ -81,7 +122,11 @@ class PartsState:
 
     def copy(self) -> PartsState:
         """An independent copy (to branch a run)."""
-        other = PartsState([part.copy() for part in self.parts])
+        other = PartsState([])
+        if self._rows is not None:
+            other.take(self.rows.copy())
+        else:
+            other._parts = [part.copy() for part in self.parts]
         other.impacts, other.chunk_hint = list(self.impacts), self.chunk_hint
         return other
 
@@ -108,10 +153,11 @@ class PartsResult:
 
 @dataclass
 class _Trial:
-    """Every part taken alone from the chunk's start to its end (copies), with how far each may have gone."""
+    """Every part taken alone from the chunk's start to its end (copies, as rows), the events of the parts that
+    had some (by part index), with how far each may have gone."""
 
-    parts: list[FeederState]
-    events: list[EventList]
+    rows: StateRows
+    events: dict[int, EventList]
     reach: np.ndarray
 
 
@@ -151,12 +197,12 @@ class PartsModel:
         """Integrate every part to ``t_target`` (s), impacts included; returns each part's mode changes.
 
         Raises :class:`~micro_feeder.physics.dynamics.SimulationError` as a single part's run does."""
-        events: list[list[EventList]] = [[] for _ in state.parts]
-        self._cascade(state, range(len(state.parts) - 1), True, source, events)     # e.g. a v0 into a touching part
+        events: list[list[EventList]] = [[] for _ in range(len(state))]
+        self._cascade(state, range(len(state) - 1), True, source, events)     # e.g. a v0 into a touching part
         while state.t < t_target:
             hint = state.chunk_hint or self.near_chunk
             t1 = self._near_end(state.t) if hint <= self.near_chunk else state.t + hint
-            self._chunk(state, min(t1, t_target), source, events)
+            self._chunk(state, min(t1, t_target), source, events, planned=t1 - state.t)
         return [EventList.concatenate(part_events) for part_events in events]
 
     def run(self, duration: float | None = None, source: Source = None, output_step: float | None = None
@@ -193,20 +239,24 @@ class PartsModel:
         return state.t, state.positions, np.array([MODES.index(p.mode) for p in state.parts])
 
     def _trial(self, state: PartsState, t1: float, source: Source) -> _Trial:
-        advanced = self.model.advance_copies(state.parts, t1, source)
+        advanced = self.model.advance_rows(state.rows, t1, source)
         reach = REACH_SAFETY * advanced.peak_speed * (t1 - state.t) + advanced.path
-        return _Trial(advanced.states, advanced.events, reach)
+        return _Trial(advanced.rows, advanced.events, reach)
 
-    def _chunk(self, state: PartsState, t1: float, source: Source, events: list[list[EventList]]) -> None:
-        """Advance every part to ``t1`` or to the first impact before it (then apply it)."""
+    def _chunk(self, state: PartsState, t1: float, source: Source, events: list[list[EventList]],
+               planned: float = 0.0) -> None:
+        """Advance every part to ``t1`` or to the first impact before it (then apply it). ``planned`` (s): the
+        chunk meant, of which the caller's end left ``t1 - state.t``; the next chunk grows from the longer of
+        the two, so that the 1-ms calls of a real-time loop do not keep the chunks below a tick."""
         t0 = state.t
+        t1_given = t1
         gap0 = self.gaps(state.positions)
         touching = gap0 <= CONTACT_GAP
         pending = -1                                # the pair whose impact ends the chunk
         while True:
             trial = self._trial(state, t1, source)
             chunk = t1 - t0
-            gap1 = self.gaps(np.array([part.x for part in trial.parts]))
+            gap1 = self.gaps(trial.rows.y[:, 0])
             reach = trial.reach[:-1] + trial.reach[1:]
             crossed = (gap1 < 0.0) & ~touching
             if pending >= 0:
@@ -228,10 +278,9 @@ class PartsModel:
                 t1, pending = (t0 + cut if cut > self.near_chunk else self._near_end(t0)), -1
                 continue
             break
-        state.parts = trial.parts
-        for i, part_events in enumerate(trial.events):
-            if len(part_events):
-                events[i].append(part_events)
+        state.take(trial.rows)
+        for i, part_events in trial.events.items():
+            events[i].append(part_events)
         if pressed.any():
             self._press_trains(state, pressed, source, events)
         # a pair that closed its gap in this chunk hits; pairs that touched all along and approach now press on
@@ -242,7 +291,8 @@ class PartsModel:
             arrived.append(pending)
         self._cascade(state, sorted(set(arrived)), True, source, events)
         self._cascade(state, np.flatnonzero(touching), False, source, events)
-        state.chunk_hint = self._next_chunk(state, chunk, gap1, reach, near | pressed)
+        grown_from = max(chunk, planned) if t1 == t1_given else chunk
+        state.chunk_hint = self._next_chunk(state, chunk, grown_from, gap1, reach, near | pressed)
 
     def _near_end(self, t0: float) -> float:
         """The end (s) of a near chunk starting at ``t0``: the next multiple of ``integration.dt``, so that a train
@@ -250,14 +300,15 @@ class PartsModel:
         on that grid too (a 1 ms tick is 10 chunks of the default 0.1 ms)."""
         return (math.floor(t0 / self.near_chunk + 1e-9) + 1) * self.near_chunk
 
-    def _next_chunk(self, state: PartsState, chunk: float, gaps: np.ndarray, reach: np.ndarray,
+    def _next_chunk(self, state: PartsState, chunk: float, grown_from: float, gaps: np.ndarray, reach: np.ndarray,
                     near: np.ndarray) -> float:
-        """The chunk to try next: short while parts are near or touching, else as long as the gaps allow."""
+        """The chunk to try next: short while parts are near or touching, else as long as the gaps allow (the
+        reach of the ``chunk`` just taken scaled) and at most twice ``grown_from``."""
         if near.any() or (gaps <= CONTACT_GAP).any():
             return self.near_chunk
         moving = reach > 0.0
         allowed = 0.5 * float(np.min(gaps[moving] / reach[moving])) * chunk if moving.any() else MAX_CHUNK
-        return min(MAX_CHUNK, max(self.near_chunk, min(2.0 * chunk, allowed)))
+        return min(MAX_CHUNK, max(self.near_chunk, min(2.0 * grown_from, allowed)))
 
     def _locate_impact(self, state: PartsState, rear: int, t1: float, gap0: float, gap1: float,
                        source: Source) -> float:
@@ -340,6 +391,8 @@ class PartsModel:
         so a row at e = 1 passes the velocity on: Newton's cradle) or presses plastically. A rebound that would
         not open the gap beyond contact within a near chunk is plastic too (chatter ends)."""
         todo = [int(rear) for rear in pairs]
+        if not todo or not (self.gaps(state.positions)[todo] <= CONTACT_GAP).any():
+            return                                  # no pair touches: none is looked at again
         last = len(state.parts) - 2
         for _ in range(100 * (last + 2) ** 2):
             if not todo:
