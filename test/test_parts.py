@@ -23,13 +23,14 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from micro_feeder.cli import main
-from micro_feeder.physics.dynamics import FeederModel
+from micro_feeder.physics.dynamics import FeederModel, Observation
 from micro_feeder.physics.dynamics.layout import FS_MAX_SPEED
 from micro_feeder.physics.dynamics.model import _WORK
 from micro_feeder.physics.parameters import ParameterError
 from micro_feeder.physics.particle import ParticleParams
 from micro_feeder.physics.parts import PartsModel
 from micro_feeder.physics.parts.figures import gate_crossings, gate_figures, spacing_figures
+from micro_feeder.physics.parts.model import PartsState
 from micro_feeder.physics.waveforms import StrokeSchedule
 from micro_feeder.settings import load_settings
 
@@ -313,3 +314,25 @@ def test_a_change_made_through_a_part_is_a_change_of_the_parts():
     copy = state.copy()
     parts.advance(state, 2e-3)
     assert copy.t == 1e-3 and state.t == 2e-3 and state.positions.tolist()[1:] == [2e-3, 3e-3]
+
+
+def test_observing_every_part_at_once_is_observing_each_alone():
+    """One compiled call observes every part (the simulator publishes all of them each tick): each part's
+    outputs are the numbers observing it alone gives, whatever the others' modes (nothing carried from one part
+    to the next)."""
+    flat = load_settings(['config/feeder.yaml', 'config/travelling_wave.yaml'], ['stroke.count=20'])
+    model = FeederModel.from_settings(flat)
+    states = [model.flying_state(0.5e-3, 2e-6, 0.01, 0.02), model.initial_state(1.0e-3, 0.0),
+              model.initial_state(1.5e-3, -0.02), model.initial_state(2.0e-3, 0.0)]
+    parts = PartsModel(model)
+    state = PartsState(states)
+    numbers = [name for name in Observation.__dataclass_fields__ if name != 'mode']
+    for t in (0.0, 2.5e-3):
+        parts.advance(state, t)
+        together = model.observe_many(state.rows)
+        for part, observed in zip(state.parts, together, strict=True):
+            alone = model.observe(part)
+            assert alone.mode == observed.mode
+            for name in numbers:
+                assert np.array_equal(getattr(alone, name), getattr(observed, name), equal_nan=True), name
+        assert t > 0.0 or {o.mode for o in together} == {'flying', 'stuck', 'sliding'}

@@ -182,7 +182,7 @@ class Stepper:
 
     def observe_parts(self) -> list[Observation]:
         """Every part's outputs now, in part order."""
-        return self.model.observe_many(self.parts_state.parts, self.schedule)
+        return self.model.observe_many(self.parts_state.rows, self.schedule)
 
     def command_trajectory(self, cmd: TrajectoryCommand) -> float:
         """Apply a checked trajectory: it replaces the schedule from its start time on (the stamp, or now

@@ -37,6 +37,7 @@ from . import kernel as k
 from . import layout
 from .conveying import ConveyingWindow, throw_number
 from .event_list import MODES, NO_EVENTS, TRANSITION_KINDS, EventList
+from .kernel_observe import observe_parts
 from .params import LANDING_LAWS, DetachParams, IntegrationParams, LandingParams
 
 
@@ -570,9 +571,10 @@ class FeederModel:
         """The outputs (docs/dynamics.md §4) at ``state.t`` (does not change the state)."""
         return self.observe_many([state], source)[0]
 
-    def observe_many(self, states: Sequence[FeederState], source: StrokeTable | StrokeSchedule | None = None
-                     ) -> list[Observation]:
-        """:meth:`observe` of several states at one sim time (the parts on a feeder), the strokes located once."""
+    def observe_many(self, states: Sequence[FeederState] | StateRows,
+                     source: StrokeTable | StrokeSchedule | None = None) -> list[Observation]:
+        """:meth:`observe` of several states at one sim time (the parts on a feeder, or their rows), in one
+        compiled call."""
         rows, stroke_velocities = self._observe_rows(states, source)
         n_fixed = layout.N_FIXED_COLUMNS
         observations = []
@@ -600,25 +602,31 @@ class FeederModel:
             return [(t1, math.inf, self._waveform if source is None else source)]
         return [(min(t_until, t1), t_until, table) for _, t_until, table in source.spans(t0, t1)]
 
-    def _observe_rows(self, states: Sequence[FeederState], source: StrokeTable | StrokeSchedule | None
+    def _observe_rows(self, states: Sequence[FeederState] | StateRows, source: StrokeTable | StrokeSchedule | None
                       ) -> tuple[np.ndarray, np.ndarray]:
         """The output rows (states, columns) at the states' time (one for all) and each one's stroke rates ṡ per
-        channel (states, channels; m/s)."""
+        channel (states, channels; m/s), in one compiled call."""
         n = len(states)
-        if n and states[0].y.size != 4 + 2 * self._n_stacks:
-            self._check_state(states[0])
-        t = states[0].t if n else 0.0
+        if not n:
+            return np.zeros((0, layout.N_FIXED_COLUMNS + self.n_actuators)), np.zeros((0, self.n_actuators))
+        n_y = 4 + 2 * self._n_stacks
+        if isinstance(states, StateRows):
+            if states.y.shape[1] != n_y:
+                self._check_state(states.view(0))
+            ys, ivs, t = states.y, states.iv, states.t
+        else:
+            for state in states:
+                if state.y.size != n_y:
+                    self._check_state(state)
+            ys, ivs, t = np.stack([s.y for s in states]), np.stack([s.iv for s in states]), states[0].t
         table = source.table_at(t) if isinstance(source, StrokeSchedule) else source
         src = self._source_table(table).as_tuple()
-        work = _WORK.arrays(4 + 2 * self._n_stacks, src[0].size)
+        work = _WORK.arrays(n_y, src[0].size)
         k.locate_all(src, t, work.cur)
         rows = np.zeros((n, layout.N_FIXED_COLUMNS + self.n_actuators))
         stroke_velocities = np.zeros((n, self.n_actuators))
-        for p, state in enumerate(states):
-            if state.y.size != work.dy.size:
-                self._check_state(state)
-            k.observe(t, state.y, state.iv, self._kernel_model, src, work.cur, work.st, work.aux, work.dy, rows[p])
-            stroke_velocities[p] = work.st[1, :self.n_actuators]
+        observe_parts(t, ys, ivs, self._kernel_model, src, work.cur, work.st, work.aux, work.dy, rows,
+                      stroke_velocities)
         return rows, stroke_velocities
 
     def _integrate(self, state: FeederState, t_target: float,
