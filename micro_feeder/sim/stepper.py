@@ -106,7 +106,7 @@ class Stepper:
     @property
     def t(self) -> float:
         """Sim time (s)."""
-        return self.state.t
+        return self.parts_state.t
 
     @property
     def limits(self) -> tuple[float, float]:
@@ -199,7 +199,7 @@ class Stepper:
             t_applied = self.applied.applied_at(cmd.command_id)
             when = 'before' if t_applied is None else f'at t = {t_applied:.9f} s'
             raise CommandRejected(f'trajectory {cmd.command_id}: {DUPLICATE} {when}, not applied again')
-        t0 = start_time(cmd.stamp, self.state.t)
+        t0 = start_time(cmd.stamp, self.t)
         if not cmd.is_stop and 0.0 < cmd.stamp < t0:
             self._check_late_join(cmd, t0)
         elif not cmd.is_stop and cmd.stamp > 0.0:
@@ -262,10 +262,10 @@ class Stepper:
 
     def command_setpoints(self, values: np.ndarray) -> None:
         """Hold the strokes at ``values`` (m) from now on (the piezo model, when on, smooths the step)."""
-        t = self.state.t
+        t = self.t
         self.schedule.replace_from(t, trajectory_table([t], np.asarray(values, dtype=float)[None, :]))
         self._prune()
 
     def _prune(self) -> None:
         """Drop the schedule pieces that ended at or before now (they no longer affect anything)."""
-        self.schedule.drop_ended(self.state.t)
+        self.schedule.drop_ended(self.t)
