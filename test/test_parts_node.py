@@ -7,6 +7,7 @@ from collections.abc import Iterator
 
 import numpy as np
 import pytest
+from node_helpers import stamp_s
 from rclpy.context import Context
 from test_simulator_node import STEP, Rig, burst_message
 
@@ -60,7 +61,11 @@ def test_every_part_is_published_in_order_as_the_stepper_computes_it(parts_rig: 
     assert np.all(table[:, 0] == stepper.t)
 
     published = [(int(kv['part']), kv['kind'], float(kv['t_s'])) for kv in
-                 ({v.key: v.value for v in m.status[0].values} for m in rig.probe.msgs['particles/transitions'])]
+                 ({v.key: v.value for v in status.values}
+                  for m in rig.probe.msgs['particles/transitions'] for status in m.status)]
+    for m in rig.probe.msgs['particles/transitions']:     # one message a tick, in time order, stamped at its first
+        times = [float(next(v.value for v in status.values if v.key == 't_s')) for status in m.status]
+        assert times == sorted(times) and stamp_s(m) == pytest.approx(times[0], abs=1e-9)
     expected = [(part, e.kind, e.t) for part, part_events in enumerate(events) for e in part_events]
     assert sorted(published) == sorted(expected) and len({p for p, _, _ in expected}) >= 2
 

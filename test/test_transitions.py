@@ -57,6 +57,27 @@ def test_transition_bytes_read_back_as_the_documented_message(source: str) -> No
                                DiagnosticArray).header.stamp == Time(sec=3, nanosec=0)
 
 
+def test_a_ticks_transitions_of_several_parts_read_back_as_one_status_each() -> None:
+    """``particles/transitions``: one message a tick holding every part's transitions in time order, each the
+    status ``particle/transitions`` gives it plus ``part``, at every alignment a status can start on; the stamp
+    is the first one's."""
+    rng = np.random.default_rng(11)
+    encoder = TransitionEncoder('feeder1/simulator')
+    kinds = itertools.cycle(itertools.product(TRANSITION_KINDS, MODES, MODES))
+    times = np.sort(10.0 ** rng.uniform(-6, 2, 200))
+    transitions = [(Event(t=float(t), kind=kind, from_mode=a, to_mode=b, x=float(rng.uniform(-1, 1) * 1e-4)), part)
+                   for (kind, a, b), t, part in zip(kinds, times, itertools.cycle((3, 42, 517, 1024, 8)), strict=False)]
+    for count in (1, 2, 7, 200):
+        items = transitions[:count]
+        message = deserialize_message(encoder.encode_parts(items), DiagnosticArray)
+        assert message.header == _reference(items[0][0], 'feeder1/simulator').header
+        expected = [_reference(event, 'feeder1/simulator').status[0] for event, _ in items]
+        for status, (_, part) in zip(expected, items, strict=True):
+            status.values.append(KeyValue(key='part', value=str(part)))
+        assert message.status == expected
+    assert {phase for *_, phase in encoder._statuses} == {0, 1, 2, 3}     # statuses began at every alignment
+
+
 @pytest.mark.parametrize('mode', MODES)
 def test_contact_state_bytes_are_the_string(mode: str) -> None:
     assert deserialize_message(contact_state_bytes(mode), String) == String(data=mode)

@@ -98,10 +98,11 @@ class SimulatorOutputs:
         parts.update(observations)
         self._pub_part_poses.publish(parts.poses)
         self._pub_part_states.publish(parts.states)
-        for part, part_events in enumerate(events):
-            for event in part_events:
-                if event.kind != 'reversal':
-                    self._pub_part_transitions.publish(self._transitions.encode(event, part))
+        transitions = [(event, part) for part, part_events in enumerate(events) if len(part_events)
+                       for event in part_events if event.kind != 'reversal']
+        if transitions:
+            transitions.sort(key=lambda item: item[0].t)
+            self._pub_part_transitions.publish(self._transitions.encode_parts(transitions))
         events = events[0] if events else []
         state = self._state_messages
         stamp = state.update(obs, obs.stroke_velocities)

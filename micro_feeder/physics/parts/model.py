@@ -189,7 +189,7 @@ class PartsModel:
 
     def gaps(self, positions: np.ndarray) -> np.ndarray:
         """Free space between neighbours (m): x_{i+1} − x_i − size."""
-        return np.diff(positions) - self.size
+        return positions[1:] - positions[:-1] - self.size
 
     # ------------------------------------------------------------------------------------------------
 
@@ -199,10 +199,10 @@ class PartsModel:
         Raises :class:`~micro_feeder.physics.dynamics.SimulationError` as a single part's run does."""
         events: list[list[EventList]] = [[] for _ in range(len(state))]
         self._cascade(state, range(len(state) - 1), True, source, events)     # e.g. a v0 into a touching part
-        while state.t < t_target:
+        while (t := state.t) < t_target:
             hint = state.chunk_hint or self.near_chunk
-            t1 = self._near_end(state.t) if hint <= self.near_chunk else state.t + hint
-            self._chunk(state, min(t1, t_target), source, events, planned=t1 - state.t)
+            t1 = self._near_end(t) if hint <= self.near_chunk else t + hint
+            self._chunk(state, min(t1, t_target), source, events, planned=t1 - t)
         return [EventList.concatenate(part_events) for part_events in events]
 
     def run(self, duration: float | None = None, source: Source = None, output_step: float | None = None
@@ -281,16 +281,20 @@ class PartsModel:
         state.take(trial.rows)
         for i, part_events in trial.events.items():
             events[i].append(part_events)
-        if pressed.any():
+        trains = bool(pressed.any())
+        if trains:
             self._press_trains(state, pressed, source, events)
         # a pair that closed its gap in this chunk hits; pairs that touched all along and approach now press on
         # each other: plastic, and not an impact
-        arrived = np.flatnonzero(~touching & (self.gaps(state.positions) <= CONTACT_GAP)).tolist()
+        closed = ~touching & ((self.gaps(state.positions) if trains else gap1) <= CONTACT_GAP)
+        arrived = np.flatnonzero(closed).tolist() if closed.any() else []
         if pending >= 0:                            # located: within the event tolerance of contact
             self._put_in_contact(state, pending)
             arrived.append(pending)
-        self._cascade(state, sorted(set(arrived)), True, source, events)
-        self._cascade(state, np.flatnonzero(touching), False, source, events)
+        if arrived:
+            self._cascade(state, sorted(set(arrived)), True, source, events)
+        if touching.any():
+            self._cascade(state, np.flatnonzero(touching), False, source, events)
         grown_from = max(chunk, planned) if t1 == t1_given else chunk
         state.chunk_hint = self._next_chunk(state, chunk, grown_from, gap1, reach, near | pressed)
 
