@@ -6,6 +6,7 @@ segment's extrema found one polynomial at a time with numpy's ``roots``.
 
 from __future__ import annotations
 
+import dataclasses
 import subprocess
 import sys
 import time
@@ -20,7 +21,7 @@ from micro_feeder.interface.names import joint_names
 from micro_feeder.physics.trajectory import breakpoints, sample_table, table_range
 from micro_feeder.physics.waveforms import StrokeParams, trajectory_table, waveform_table
 from micro_feeder.settings import load_settings
-from micro_feeder.sim.commands import CommandRejected, parse_trajectory
+from micro_feeder.sim.commands import CommandRejected, parse_trajectory, parse_trajectory_cdr
 from micro_feeder.sim.stepper import Stepper, build_model
 from micro_feeder.sim.stream import StrokeStream, sample_waveform
 
@@ -233,3 +234,27 @@ def test_a_continuous_stream_over_60_s_stays_bounded_and_seamless() -> None:
             assert error.max() <= 1e-12
     assert checked > 10 and largest <= 2000
     assert biggest < 256 * 1024          # stated (docs/interface.md): < 256 KiB per message with 4 actuators
+
+
+def test_a_window_applied_with_the_table_made_when_parsed_is_the_window_applied_afresh(model) -> None:
+    """The simulator builds a stamped window's interpolation when it parses it (outside its lock) and only
+    installs it when applying: the schedule is bit for bit the one built at apply time. A command whose knots
+    do not start at its stamp has none (it is joined to the stroke in force when applied)."""
+    n = model.n_actuators
+    params = StrokeParams(count=1, phases=(0.0,) * n)
+    stream = StrokeStream(params, 0, n, origin_ns=3_000_000, window=0.02, max_points=2000, knots_per_stroke=1)
+    names = joint_names(n)
+    prepared, afresh = Stepper(model), Stepper(model)
+    for _ in range(6):
+        stamp, offsets, knots = stream.next_window()
+        data = trajectory_cdr.encode(names, offsets, knots[0], knots[1], knots[2], stamps.to_time(stamp * 1e-9))
+        command = parse_trajectory_cdr(data, names, prepared.limits)
+        assert command.own_table is not None
+        prepared.command_trajectory(command)
+        afresh.command_trajectory(dataclasses.replace(command, own_table=None))
+    t = np.linspace(0.0, stream.scheduled_until, 20001)
+    assert np.array_equal(np.array([prepared.schedule.evaluate(x) for x in t]),
+                          np.array([afresh.schedule.evaluate(x) for x in t]))
+    zeros = np.zeros((2, n))
+    later = trajectory_cdr.encode(names, np.array([1_000_000, 2_000_000]), zeros, zeros, zeros, stamps.to_time(0.5))
+    assert parse_trajectory_cdr(later, names, prepared.limits).own_table is None

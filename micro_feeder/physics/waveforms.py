@@ -655,7 +655,8 @@ class StrokeSchedule:
 
     def command_trajectory(self, t_start: float, knot_times: Sequence[float], positions: np.ndarray,
                            velocities: np.ndarray | None = None,
-                           accelerations: np.ndarray | None = None) -> StrokeTable:
+                           accelerations: np.ndarray | None = None, own_table: StrokeTable | None = None
+                           ) -> StrokeTable:
         """Replace the schedule from ``t_start`` with a trajectory through the given knots.
 
         ``knot_times`` are absolute sim times (header stamp + time_from_start); knots before ``t_start`` are
@@ -667,8 +668,14 @@ class StrokeSchedule:
         value with ṡ = s̈ = 0: taking it instead of the shared knot put a velocity kink at every window
         joint, which threw the part of the soak's travelling wave 123 mm.) An empty trajectory holds the
         current position. Returns the table now in force from ``t_start``.
+
+        ``own_table``: :func:`trajectory_table` of exactly these knots, made beforehand; it is the table when
+        the knots start at ``t_start`` and none is dropped (then the current stroke plays no part).
         """
         times = np.asarray(knot_times, dtype=float)
+        if own_table is not None and times.size and times[0] == t_start and bool((times[1:] > t_start).all()):
+            self.replace_from(t_start, own_table)
+            return own_table
         keep = times > t_start
         current = self.evaluate(t_start)
         n_act = current.shape[1]

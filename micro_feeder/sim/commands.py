@@ -10,7 +10,7 @@ import array
 import logging
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -19,6 +19,7 @@ from trajectory_msgs.msg import JointTrajectory, JointTrajectoryPoint
 from ..interface import trajectory_cdr, wire
 from ..interface.stamps import seconds
 from ..physics.trajectory import CommandLimits
+from ..physics.waveforms import StrokeTable, trajectory_table
 
 MAX_POINTS = 100_000     # points of one trajectory message: longer strokes go in windows
 _LOG = logging.getLogger('micro_feeder.commands')
@@ -57,6 +58,10 @@ class TrajectoryCommand:
     velocities: np.ndarray | None
     accelerations: np.ndarray | None
     command_id: str = ''       # header.frame_id: the sender's identity for the command ('' = none)
+    # the interpolation through its own knots from its stamp (a stamped command with a knot at offset 0, as a
+    # stream's windows are), made when it is parsed: the simulator parses outside its lock, and applying a
+    # window that starts where it is stamped then only installs this table
+    own_table: StrokeTable | None = field(default=None, compare=False, repr=False)
 
     @property
     def is_stop(self) -> bool:
@@ -198,7 +203,13 @@ def _checked(stamp: float, names: list[str], n_points: int, knots: Callable[[lis
     if accelerations is not None:
         _check_range(accelerations, -bounds.acceleration, bounds.acceleration, 'trajectory: acceleration',
                      'm/s^2')
-    return TrajectoryCommand(stamp, offsets, positions, velocities, accelerations, command_id)
+    own_table = None
+    if stamp > 0.0 and offsets[0] == 0.0:
+        try:
+            own_table = trajectory_table(stamp + offsets, positions, velocities, accelerations)
+        except ValueError:              # made again, and refused with the reason, when applied
+            own_table = None
+    return TrajectoryCommand(stamp, offsets, positions, velocities, accelerations, command_id, own_table)
 
 
 def parse_setpoints(data: Sequence[float], n_actuators: int, limits: tuple[float, float]) -> np.ndarray:

@@ -210,7 +210,7 @@ class Stepper:
             base = t0 if cmd.stamp == 0.0 else cmd.stamp
             before = self.schedule.pieces
             table = self.schedule.command_trajectory(t0, base + cmd.offsets, cmd.positions, cmd.velocities,
-                                                     cmd.accelerations)
+                                                     cmd.accelerations, cmd.own_table)
             reason = check_table(table, CommandLimits(*self.limits))
             if reason is not None:
                 self.schedule = StrokeSchedule.of_pieces(before)
@@ -230,7 +230,8 @@ class Stepper:
         if times[-1] <= t0:
             raise CommandRejected(f'trajectory late by {late_ms:.3f} ms: it ended before it arrived (at '
                                   f't = {times[-1]:.9f} s), not applied')
-        own = StrokeSchedule(trajectory_table(times, cmd.positions, cmd.velocities, cmd.accelerations)).evaluate(t0)
+        own_table = cmd.own_table or trajectory_table(times, cmd.positions, cmd.velocities, cmd.accelerations)
+        own = StrokeSchedule(own_table).evaluate(t0)
         now = self.schedule.evaluate(t0)
         jump = np.abs(own[:2] - now[:2])
         if jump[0].max() > JOIN_TOLERANCE[0] or jump[1].max() > JOIN_TOLERANCE[1]:
