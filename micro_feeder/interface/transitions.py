@@ -13,6 +13,7 @@ and letting ``publish`` serialize it cost ~60 µs, the largest share of the simu
 from __future__ import annotations
 
 import struct
+from collections.abc import Sequence
 
 from diagnostic_msgs.msg import DiagnosticStatus
 
@@ -28,42 +29,33 @@ class TransitionEncoder:
     Each event is one status named ``{source}: transition``: level OK, ``message`` = the kind, hardware id
     ``micro_feeder``, key/values ``kind``, ``from``, ``to``, ``t_s`` (exact sim time, repr of the float) and
     ``x_m`` (position, m), and with several parts ``part`` (its index, in order along the feeder);
-    ``header.stamp`` = the sim time rounded to the nanosecond, frame ``feeder``. Everything from the frame to
-    the key ``t_s`` depends only on (kind, from, to, whether a part is named): it is kept per such key.
+    ``header.stamp`` = the sim time rounded to the nanosecond, frame ``feeder``. A status from its level to
+    the key ``t_s`` depends only on (kind, from, to, whether a part is named, its alignment): it is kept per
+    such key.
     """
 
     def __init__(self, source: str):
         self._source = source
-        self._middles: dict[tuple[str, str, str, bool], bytes] = {}
-        self._statuses: dict[tuple[str, str, str, int], bytes] = {}
+        self._statuses: dict[tuple[str, str, str, bool, int], bytes] = {}
 
     def encode(self, event: Event, part: int | None = None) -> bytes:
         """``event`` (of part ``part``, when given) as the CDR bytes of its DiagnosticArray."""
-        key = (event.kind, event.from_mode, event.to_mode, part is not None)
-        middle = self._middles.get(key)
-        if middle is None:
-            middle = self._middles[key] = self._middle(*key)
-        payload = bytearray(STAMP.pack(*stamp_parts(event.t)))
-        payload += middle
-        put_string(payload, repr(event.t))
-        put_string(payload, 'x_m')
-        put_string(payload, repr(event.x))
-        if part is not None:
-            put_string(payload, 'part')
-            put_string(payload, str(part))
-        return ENCAPSULATION + payload
+        return self._encode([(event, part)])
 
     def encode_parts(self, transitions: list[tuple[Event, int]]) -> bytes:
         """Several parts' transitions (event, part index; in time order) as the CDR bytes of one DiagnosticArray,
         one status each as :meth:`encode` writes it with the part, ``header.stamp`` the first one's sim time: what
         ``particles/transitions`` carries once a tick (a publish cost ~16 µs, and 16 hopping parts change mode
         ~6 times a ms)."""
+        return self._encode(transitions)
+
+    def _encode(self, transitions: Sequence[tuple[Event, int | None]]) -> bytes:
         payload = bytearray(STAMP.pack(*stamp_parts(transitions[0][0].t)))
         put_string(payload, FEEDER_FRAME)
         put_uint32(payload, len(transitions))
         statuses = self._statuses
         for event, part in transitions:
-            key = (event.kind, event.from_mode, event.to_mode, len(payload) % 4)
+            key = (event.kind, event.from_mode, event.to_mode, part is not None, len(payload) % 4)
             status = statuses.get(key)
             if status is None:
                 status = statuses[key] = self._status(*key)
@@ -71,29 +63,15 @@ class TransitionEncoder:
             put_string(payload, repr(event.t))
             put_string(payload, 'x_m')
             put_string(payload, repr(event.x))
-            put_string(payload, 'part')
-            put_string(payload, str(part))
+            if part is not None:
+                put_string(payload, 'part')
+                put_string(payload, str(part))
         return ENCAPSULATION + payload
 
-    def _status(self, kind: str, from_mode: str, to_mode: str, phase: int) -> bytes:
-        """A status with a part, from its level up to the key ``t_s``, starting ``phase`` bytes past a multiple
-        of 4 of the payload (strings align on the payload's start)."""
+    def _status(self, kind: str, from_mode: str, to_mode: str, with_part: bool, phase: int) -> bytes:
+        """A status from its level up to the key ``t_s``, starting ``phase`` bytes past a multiple of 4 of the
+        payload (strings align on the payload's start)."""
         payload = bytearray(phase)
-        payload += DiagnosticStatus.OK                              # level: one byte
-        for text in (f'{self._source}: transition', kind, 'micro_feeder'):   # name, message, hardware id
-            put_string(payload, text)
-        put_uint32(payload, 6)                                      # key/values
-        for key, value in (('kind', kind), ('from', from_mode), ('to', to_mode)):
-            put_string(payload, key)
-            put_string(payload, value)
-        put_string(payload, 't_s')
-        return bytes(payload[phase:])
-
-    def _middle(self, kind: str, from_mode: str, to_mode: str, with_part: bool = False) -> bytes:
-        """The payload after the stamp (which is 8 bytes, so alignment carries over) up to the key ``t_s``."""
-        payload = bytearray(STAMP.size)
-        put_string(payload, FEEDER_FRAME)
-        put_uint32(payload, 1)                                      # one status
         payload += DiagnosticStatus.OK                              # level: one byte
         for text in (f'{self._source}: transition', kind, 'micro_feeder'):   # name, message, hardware id
             put_string(payload, text)
@@ -102,7 +80,7 @@ class TransitionEncoder:
             put_string(payload, key)
             put_string(payload, value)
         put_string(payload, 't_s')
-        return bytes(payload[STAMP.size:])
+        return bytes(payload[phase:])
 
 
 def status_messages(data: bytes) -> list[str] | None:

@@ -7,6 +7,7 @@ simulator logs it, counts it on ``/diagnostics`` and carries on with the command
 from __future__ import annotations
 
 import array
+import contextlib
 import logging
 import math
 from collections.abc import Callable, Sequence
@@ -205,10 +206,8 @@ def _checked(stamp: float, names: list[str], n_points: int, knots: Callable[[lis
                      'm/s^2')
     own_table = None
     if stamp > 0.0 and offsets[0] == 0.0:
-        try:
+        with contextlib.suppress(ValueError):      # made again, and refused with the reason, when applied
             own_table = trajectory_table(stamp + offsets, positions, velocities, accelerations)
-        except ValueError:              # made again, and refused with the reason, when applied
-            own_table = None
     return TrajectoryCommand(stamp, offsets, positions, velocities, accelerations, command_id, own_table)
 
 

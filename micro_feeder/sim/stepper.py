@@ -230,7 +230,8 @@ class Stepper:
         if times[-1] <= t0:
             raise CommandRejected(f'trajectory late by {late_ms:.3f} ms: it ended before it arrived (at '
                                   f't = {times[-1]:.9f} s), not applied')
-        own_table = cmd.own_table or trajectory_table(times, cmd.positions, cmd.velocities, cmd.accelerations)
+        own_table = cmd.own_table if cmd.own_table is not None else \
+            trajectory_table(times, cmd.positions, cmd.velocities, cmd.accelerations)
         own = StrokeSchedule(own_table).evaluate(t0)
         now = self.schedule.evaluate(t0)
         jump = np.abs(own[:2] - now[:2])

@@ -475,17 +475,11 @@ class FeederModel:
             src = self._source_table(table).as_tuple()
             work = _WORK.arrays(ys.shape[1], src[0].size)
             on_now = (self, table, t_limit)
-            first = ons[0]
-            if all(on is first for on in ons) and running.all():   # the rows were taken together last time
-                if not (first and first[0] is self and first[1] is table and first[2] == t_limit):
-                    fss[:, layout.FS_AHEAD_T1] = math.nan
-                ons = [on_now] * n
-            else:
-                for p, (on, go) in enumerate(zip(ons, running.tolist(), strict=True)):
-                    if not (on and on[0] is self and on[1] is table and on[2] == t_limit):
-                        fss[p, layout.FS_AHEAD_T1] = math.nan      # taken on another model or source: not valid
-                    if go:                                          # not a row left for the fallback below
-                        ons[p] = on_now
+            for p, (on, go) in enumerate(zip(ons, running.tolist(), strict=True)):
+                if not (on and on[0] is self and on[1] is table and on[2] == t_limit):
+                    fss[p, layout.FS_AHEAD_T1] = math.nan      # taken on another model or source: not valid
+                if go:                                          # not a row left for the fallback below
+                    ons[p] = on_now
             counts = np.zeros(n, dtype=np.int64)
             n_ev = k.advance_parts(ys, ivs, fss, aheads, running, status, t_until, t_limit, self._kernel_model, src,
                                    work.batch_ev_i, work.batch_ev_f, counts, path,

@@ -103,12 +103,12 @@ class PartsState:
     @property
     def t(self) -> float:
         """Sim time (s)."""
-        return self._rows.t if self._parts is None else self._parts[0].t
+        return self._rows.t if self._rows is not None else self._parts[0].t
 
     @property
     def positions(self) -> np.ndarray:
         """Every part's x (m)."""
-        return self._rows.y[:, 0].copy() if self._parts is None else np.array([part.x for part in self._parts])
+        return self._rows.y[:, 0].copy() if self._rows is not None else np.array([part.x for part in self._parts])
 
     @property
     def velocities(self) -> np.ndarray:
@@ -287,14 +287,12 @@ class PartsModel:
         # a pair that closed its gap in this chunk hits; pairs that touched all along and approach now press on
         # each other: plastic, and not an impact
         closed = ~touching & ((self.gaps(state.positions) if trains else gap1) <= CONTACT_GAP)
-        arrived = np.flatnonzero(closed).tolist() if closed.any() else []
+        arrived = np.flatnonzero(closed).tolist()
         if pending >= 0:                            # located: within the event tolerance of contact
             self._put_in_contact(state, pending)
             arrived.append(pending)
-        if arrived:
-            self._cascade(state, sorted(set(arrived)), True, source, events)
-        if touching.any():
-            self._cascade(state, np.flatnonzero(touching), False, source, events)
+        self._cascade(state, sorted(set(arrived)), True, source, events)
+        self._cascade(state, np.flatnonzero(touching), False, source, events)
         grown_from = max(chunk, planned) if t1 == t1_given else chunk
         state.chunk_hint = self._next_chunk(state, chunk, grown_from, gap1, reach, near | pressed)
 
