@@ -270,16 +270,11 @@ def test_simulate_reports_every_part_the_impacts_and_the_gate(tmp_path):
 
 
 def _chunks_taken(parts: PartsModel, state, ends) -> int:
-    """How many chunks (one compiled call each) ``parts`` takes to advance ``state`` through ``ends`` (s)."""
-    calls = []
-    original = parts._trial
-    parts._trial = lambda *args: calls.append(1) or original(*args)
-    try:
-        for t_end in ends:
-            parts.advance(state, float(t_end))
-    finally:
-        del parts._trial
-    return len(calls)
+    """How many chunks (every part alone over one) ``parts`` tries to advance ``state`` through ``ends`` (s)."""
+    before = parts.trials
+    for t_end in ends:
+        parts.advance(state, float(t_end))
+    return parts.trials - before
 
 
 def test_one_ms_calls_take_about_the_chunks_of_one_call():
@@ -336,3 +331,57 @@ def test_observing_every_part_at_once_is_observing_each_alone():
             for name in numbers:
                 assert np.array_equal(getattr(alone, name), getattr(observed, name), equal_nan=True), name
         assert t > 0.0 or {o.mode for o in together} == {'flying', 'stuck', 'sliding'}
+
+
+def _python_trials(parts: PartsModel) -> list[int]:
+    """A counter of the chunks ``parts`` tries in Python (:meth:`PartsModel._trial`)."""
+    calls: list[int] = []
+    original = parts._trial
+    parts._trial = lambda *args: calls.append(1) or original(*args)
+    return calls
+
+
+def _same_parts(a: PartsState, b: PartsState) -> None:
+    ra, rb = a.rows, b.rows
+    assert np.array_equal(ra.y, rb.y) and np.array_equal(ra.iv, rb.iv) and np.array_equal(ra.ahead, rb.ahead)
+    assert np.array_equal(ra.fs, rb.fs, equal_nan=True)
+    assert [on and on[2] for on in ra.ons] == [on and on[2] for on in rb.ons]    # on a table until the same time
+    assert a.impacts == b.impacts and a.chunk_hint == b.chunk_hint
+
+
+@pytest.mark.parametrize('case', ['track, 16 parts apart', 'crowded wave, plastic', 'crowded wave, e = 0.5',
+                                  'track, a hold mid-run'])
+def test_the_compiled_chunks_are_the_python_chunks_bit_for_bit(case):
+    """The chunks in which no parts meet are taken in one compiled call (parts.apart); they are the very chunks
+    the Python loop takes: every part's state, events, the impacts and the next chunk equal bit for bit, in 1-ms
+    calls as a real-time loop makes them, with parts far apart (where the compiled call takes nearly every
+    chunk), crowded (handing the chunks with impacts and trains back) and over stroke segments."""
+    if case.startswith('track'):
+        flat = {**load_settings(), 'surface.kind': 'track', 'contact.model': 'coulomb', 'contact.mu': 0.5,
+                'stroke.waveform': 'sine', 'stroke.frequency': 100.0, 'stroke.amplitude': 60e-6, 'stroke.count': 20,
+                'particle.x0': [round(k * 0.3e-3, 6) for k in range(16 if 'apart' in case else 4)]}
+    else:
+        flat = {**load_settings(['config/feeder.yaml', 'config/travelling_wave.yaml'], ['stroke.count=20']),
+                'particle.x0': (0.4e-3 + 0.13e-3 * np.arange(10)).tolist(),
+                'particle.restitution': 0.5 if '0.5' in case else 0.0}
+    compiled, python = PartsModel.from_settings(flat), PartsModel.from_settings(flat)
+    python.compiled_chunks = False
+    source = None
+    if 'hold' in case:
+        source = StrokeSchedule(compiled.model.waveform())
+        source.hold_from(0.0305)
+    in_python = _python_trials(compiled)
+    a, b = compiled.initial_state(), python.initial_state()
+    for t_end in np.arange(1, 121) * 1e-3:
+        events_a = compiled.advance(a, float(t_end), source)
+        events_b = python.advance(b, float(t_end), source)
+        assert [list(e) for e in events_a] == [list(e) for e in events_b], t_end
+    _same_parts(a, b)
+    assert [list(e) for e in compiled.advance(a, 0.2, source)] == [list(e) for e in python.advance(b, 0.2, source)]
+    _same_parts(a, b)
+    if 'apart' in case:
+        assert len(in_python) < 0.02 * python.trials, (len(in_python), python.trials)
+    elif 'hold' in case:        # the call over the hold's start spans two tables: Python's
+        assert 0 < len(in_python) < 0.1 * python.trials, (len(in_python), python.trials)
+    else:
+        assert a.collisions > 0 and len(in_python) < python.trials, (len(in_python), python.trials)

@@ -65,6 +65,12 @@ def jit(function: F) -> F:
     return numba.njit(cache=True, error_model='numpy', _nrt=False, nogil=True, fastmath=FASTMATH)(function)
 
 
+def jit_exact(function: F) -> F:
+    """:func:`jit` without :data:`FASTMATH`: every product and sum rounded on its own, as numpy rounds them, for
+    compiled code that must take the very decisions of the numpy code it stands in for."""
+    return numba.njit(cache=True, error_model='numpy', _nrt=False, nogil=True)(function)
+
+
 def jit_inline(function: F) -> F:
     """:func:`jit` for the small functions of the hot path, inlined into their callers by numba.
 

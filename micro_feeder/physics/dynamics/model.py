@@ -472,18 +472,10 @@ class FeederModel:
         ons = list(rows.ons)
         collected: dict[int, list[EventList]] = {}
         for t_until, t_limit, table in self._segments(float(fss[0, layout.FS_T]), t_target, source):
-            src = self._source_table(table).as_tuple()
-            work = _WORK.arrays(ys.shape[1], src[0].size)
-            on_now = (self, table, t_limit)
-            for p, (on, go) in enumerate(zip(ons, running.tolist(), strict=True)):
-                if not (on and on[0] is self and on[1] is table and on[2] == t_limit):
-                    fss[p, layout.FS_AHEAD_T1] = math.nan      # taken on another model or source: not valid
-                if go:                                          # not a row left for the fallback below
-                    ons[p] = on_now
+            src, work, records = self._put_on(ys.shape[1], fss, ons, running, table, t_limit)
             counts = np.zeros(n, dtype=np.int64)
             n_ev = k.advance_parts(ys, ivs, fss, aheads, running, status, t_until, t_limit, self._kernel_model, src,
-                                   work.batch_ev_i, work.batch_ev_f, counts, path,
-                                   work.records(layout.N_FIXED_COLUMNS + self.n_actuators, False), 0,
+                                   work.batch_ev_i, work.batch_ev_f, counts, path, records, 0,
                                    work.scratch, work.st, work.aux, work.cur)
             if n_ev:
                 ends = np.cumsum(counts)
@@ -503,6 +495,37 @@ class FeederModel:
         peak = fss[:, layout.FS_MAX_SPEED].copy()
         fss[:, layout.FS_MAX_SPEED] = np.maximum(run_max, peak)
         return RowsAdvance(advanced, {p: EventList.concatenate(e) for p, e in collected.items()}, peak, path)
+
+    def _put_on(self, n_y: int, fss: np.ndarray, ons: list[tuple], running: np.ndarray, table: StrokeTable,
+                t_limit: float) -> tuple[tuple, _KernelWork, np.ndarray]:
+        """Rows about to be advanced on ``table`` (valid until ``t_limit``): a row taken on another model or
+        table loses its look-ahead (``fss``), and each ``running`` row is marked as on this one (``ons``).
+        Returns the kernel's stroke source, work arrays and (unused) output rows."""
+        src = self._source_table(table).as_tuple()
+        work = _WORK.arrays(n_y, src[0].size)
+        on_now = (self, table, t_limit)
+        for p, (on, go) in enumerate(zip(ons, running.tolist(), strict=True)):
+            if not (on and on[0] is self and on[1] is table and on[2] == t_limit):
+                fss[p, layout.FS_AHEAD_T1] = math.nan      # taken on another model or source: not valid
+            if go:                                          # not a row left for the fallback below
+                ons[p] = on_now
+        return src, work, work.records(layout.N_FIXED_COLUMNS + self.n_actuators, False)
+
+    def rows_on_one_table(self, rows: StateRows, t_target: float, source: StrokeTable | StrokeSchedule | None
+                          ) -> tuple[layout.KernelModel, tuple, float, _KernelWork, np.ndarray] | None:
+        """For a compiled caller advancing ``rows`` in place to at most ``t_target`` (s) by
+        :func:`.kernel.advance_parts`: None unless one stroke table is in force over the whole span; else the
+        rows marked as on it (as :meth:`advance_rows` marks them) and what the kernel takes: its model, the
+        stroke source, the time the table stops being valid (s), the work arrays and the output rows."""
+        segments = self._segments(rows.t, t_target, source)
+        if len(segments) != 1:
+            return None
+        n_y = rows.y.shape[1]
+        if n_y != 4 + 2 * self._n_stacks:
+            self._check_state(rows.view(0))
+        _, t_limit, table = segments[0]
+        src, work, records = self._put_on(n_y, rows.fs, rows.ons, np.ones(len(rows), dtype=np.bool_), table, t_limit)
+        return self._kernel_model, src, t_limit, work, records
 
     def settle(self, state: FeederState, source: StrokeTable | StrokeSchedule | None = None,
                max_time: float | None = None, step: float | None = None) -> EventList:

@@ -18,7 +18,7 @@ SI units.
 
 from __future__ import annotations
 
-import math
+import threading
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
@@ -28,14 +28,12 @@ import numpy as np
 from ..dynamics import MODES, EventList, FeederModel, FeederState, SimulationError
 from ..dynamics.model import StateRows
 from ..waveforms import StrokeSchedule, StrokeTable
+from .apart import CONTACT_GAP, REACH_SAFETY, REACHED, advance_apart, near_end, next_chunk
 from .impacts import common_velocity, newton_impact, packed_positions, pooled_velocities
 
 Source = StrokeTable | StrokeSchedule | None
 
-REACH_SAFETY = 2.0          # how far a part may have gone in a chunk: this times its largest speed times the chunk
-CONTACT_GAP = 1e-12         # m: two parts this close (or closer) touch
 APPROACH = 1e-12            # relative: a rear part faster than the front one by more than this fraction approaches
-MAX_CHUNK = 1.0             # s: the longest chunk, when no two parts are near each other
 
 
 class Impact(NamedTuple):
@@ -171,6 +169,8 @@ class PartsModel:
         self.restitution = model.particle.restitution
         self.near_chunk = model.integration.dt          # s: the longest chunk while two parts are near
         self.event_tolerance = model.integration.event_tolerance
+        self.compiled_chunks = True                     # False: every chunk in Python (to compare the two)
+        self.trials = 0                                 # chunks tried so far (every part alone over one)
 
     @classmethod
     def from_settings(cls, flat: Mapping[str, Any], **overrides: Any) -> PartsModel:
@@ -199,7 +199,10 @@ class PartsModel:
         Raises :class:`~micro_feeder.physics.dynamics.SimulationError` as a single part's run does."""
         events: list[list[EventList]] = [[] for _ in range(len(state))]
         self._cascade(state, range(len(state) - 1), True, source, events)     # e.g. a v0 into a touching part
-        while (t := state.t) < t_target:
+        while state.t < t_target:
+            if self.compiled_chunks and self._advance_apart(state, t_target, source, events):
+                break
+            t = state.t
             hint = state.chunk_hint or self.near_chunk
             t1 = self._near_end(t) if hint <= self.near_chunk else t + hint
             self._chunk(state, min(t1, t_target), source, events, planned=t1 - t)
@@ -235,10 +238,34 @@ class PartsModel:
 
     # ------------------------------------------------------------------------------------------------
 
+    def _advance_apart(self, state: PartsState, t_target: float, source: Source, events: list[list[EventList]]
+                       ) -> bool:
+        """Take the chunks towards ``t_target`` in which no two parts touch or meet in one compiled call
+        (:func:`.apart.advance_apart`: the chunks :meth:`_chunk` would take, bit for bit); True when it got
+        there, False when the next chunk is :meth:`_chunk`'s."""
+        if len(state) < 2 or (self.gaps(state.positions) <= CONTACT_GAP).any():
+            return False
+        rows = state.rows
+        kernel = self.model.rows_on_one_table(rows, t_target, source)
+        if kernel is None:
+            return False
+        model, src, t_limit, work, records = kernel
+        space = _APART_WORK.arrays(rows)
+        space.hint[0] = state.chunk_hint
+        code = advance_apart(rows.y, rows.iv, rows.fs, rows.ahead, t_target, t_limit, self.size, self.near_chunk,
+                             space.hint, model, src, *space.trial, *space.per_part, work.batch_ev_i,
+                             work.batch_ev_f, *space.out, records, 0, work.scratch, work.st, work.aux, work.cur)
+        state.take(rows)                            # changed in place: the parts' views are rebuilt from them
+        state.chunk_hint = float(space.hint[0])
+        self.trials += int(space.out[3][1])
+        space.deal(events)
+        return code == REACHED
+
     def _sample(self, state: PartsState) -> tuple[float, np.ndarray, np.ndarray]:
         return state.t, state.positions, np.array([MODES.index(p.mode) for p in state.parts])
 
     def _trial(self, state: PartsState, t1: float, source: Source) -> _Trial:
+        self.trials += 1
         advanced = self.model.advance_rows(state.rows, t1, source)
         reach = REACH_SAFETY * advanced.peak_speed * (t1 - state.t) + advanced.path
         return _Trial(advanced.rows, advanced.events, reach)
@@ -294,23 +321,13 @@ class PartsModel:
         self._cascade(state, sorted(set(arrived)), True, source, events)
         self._cascade(state, np.flatnonzero(touching), False, source, events)
         grown_from = max(chunk, planned) if t1 == t1_given else chunk
-        state.chunk_hint = self._next_chunk(state, chunk, grown_from, gap1, reach, near | pressed)
+        state.chunk_hint = next_chunk(gap1, reach, bool((near | pressed).any()), chunk, grown_from, self.near_chunk)
 
     def _near_end(self, t0: float) -> float:
         """The end (s) of a near chunk starting at ``t0``: the next multiple of ``integration.dt``, so that a train
         is stepped at the same instants whichever calls (ticks, one run) a path advances by, as long as they end
         on that grid too (a 1 ms tick is 10 chunks of the default 0.1 ms)."""
-        return (math.floor(t0 / self.near_chunk + 1e-9) + 1) * self.near_chunk
-
-    def _next_chunk(self, state: PartsState, chunk: float, grown_from: float, gaps: np.ndarray, reach: np.ndarray,
-                    near: np.ndarray) -> float:
-        """The chunk to try next: short while parts are near or touching, else as long as the gaps allow (the
-        reach of the ``chunk`` just taken scaled) and at most twice ``grown_from``."""
-        if near.any() or (gaps <= CONTACT_GAP).any():
-            return self.near_chunk
-        moving = reach > 0.0
-        allowed = 0.5 * float(np.min(gaps[moving] / reach[moving])) * chunk if moving.any() else MAX_CHUNK
-        return min(MAX_CHUNK, max(self.near_chunk, min(2.0 * grown_from, allowed)))
+        return near_end(t0, self.near_chunk)
 
     def _locate_impact(self, state: PartsState, rear: int, t1: float, gap0: float, gap1: float,
                        source: Source) -> float:
@@ -473,3 +490,47 @@ def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
         else:
             runs.append((int(i), int(i)))
     return runs
+
+
+class _ApartWork:
+    """:func:`.apart.advance_apart`'s work space for one number of parts and state size, and the events it
+    leaves (``out``: kinds, times and positions, part), dealt to the parts."""
+
+    EVENTS = 8192           # events of one call (more: the chunk that would overflow is handed back)
+
+    def __init__(self, n: int, rows: StateRows):
+        self.hint = np.zeros(1)
+        self.trial = (np.empty_like(rows.y), np.empty_like(rows.iv), np.empty_like(rows.fs), np.empty_like(rows.ahead))
+        self.per_part = (np.zeros(n, dtype=np.bool_), np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64),
+                         *(np.zeros(n) for _ in range(6)))
+        self.out = (np.zeros((self.EVENTS, 3), dtype=np.int64), np.zeros((self.EVENTS, 2)),
+                    np.zeros(self.EVENTS, dtype=np.int64), np.zeros(2, dtype=np.int64))
+
+    def deal(self, events: list[list[EventList]]) -> None:
+        """Append the events of the last call to each part's list, in time order."""
+        out_i, out_f, out_part, n_out = self.out
+        n = int(n_out[0])
+        if not n:
+            return
+        order = np.argsort(out_part[:n], kind='stable')
+        parts = out_part[:n][order]
+        bounds = np.flatnonzero(np.diff(parts)) + 1
+        for piece in np.split(order, bounds):
+            events[int(out_part[piece[0]])].append(EventList(out_i[piece], out_f[piece]))
+
+
+class _ThreadApartWork(threading.local):
+    """:class:`_ApartWork` per thread and shape (the compiled call releases the GIL)."""
+
+    def __init__(self) -> None:
+        self._by_shape: dict[tuple, _ApartWork] = {}
+
+    def arrays(self, rows: StateRows) -> _ApartWork:
+        key = (rows.y.shape, rows.iv.shape, rows.fs.shape, rows.ahead.shape)
+        work = self._by_shape.get(key)
+        if work is None:
+            work = self._by_shape[key] = _ApartWork(len(rows), rows)
+        return work
+
+
+_APART_WORK = _ThreadApartWork()
