@@ -7,16 +7,18 @@ import math
 
 import numpy as np
 import pytest
-from geometry_msgs.msg import PoseStamped, TwistStamped, WrenchStamped
+from geometry_msgs.msg import PoseArray, PoseStamped, TwistStamped, WrenchStamped
 from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Header
+from std_msgs.msg import Float64MultiArray, Header
 from visualization_msgs.msg import Marker, MarkerArray
 
 from micro_feeder.interface.messages import StateMessages, SurfaceMarkers, header_bytes, tilt_quaternion
+from micro_feeder.interface.parts_messages import MODE_CODES, PART_STATE_FIELDS, PartsMessages
 from micro_feeder.interface.stamps import seconds, to_time
 from micro_feeder.physics.dynamics import FeederModel
+from micro_feeder.physics.dynamics.model import StateRows
 
 
 @pytest.mark.parametrize('n_actuators', [1, 3, 64])
@@ -106,3 +108,30 @@ def test_header_bytes_are_what_rclpy_serializes(frame_id):
         expected = Header(stamp=to_time(t), frame_id=frame_id)
         assert header_bytes(t, frame_id) == serialize_message(expected)
         assert deserialize_message(header_bytes(t, frame_id), Header) == expected
+
+
+def test_every_parts_messages_hold_each_parts_observation():
+    """particles/poses and particles/states are written from the rows of one compiled call (no Observation
+    per part): what a subscriber deserializes is each part's observation, part after part, stuck, sliding and
+    in flight, tick after tick."""
+    model = FeederModel()
+    states = [model.initial_state(0.5e-3), model.initial_state(1.5e-3, 0.02),
+              model.flying_state(2.5e-3, 3e-6, 0.01, 0.2)]
+    messages = PartsMessages(len(states))
+    for t in (1e-4, 7e-4, 2.3e-3):
+        for state in states:
+            model.advance(state, t)
+        observed = model.observe_rows(StateRows.of(states))
+        assert [observed[i].mode for i in range(3)] == [state.mode for state in states]
+        messages.update(observed)
+        poses = deserialize_message(messages.poses, PoseArray)
+        table = np.asarray(deserialize_message(messages.states, Float64MultiArray).data).reshape(3, -1)
+        assert seconds(poses.header.stamp) == pytest.approx(t, abs=1e-9)
+        for i, (pose, row) in enumerate(zip(poses.poses, table, strict=True)):
+            obs = observed[i]
+            orientation = (pose.orientation.x, pose.orientation.y, pose.orientation.z, pose.orientation.w)
+            assert (pose.position.x, pose.position.y, pose.position.z) == (obs.x, 0.0, obs.z)
+            assert orientation == tilt_quaternion(obs.theta)
+            expected = {'t': obs.t, 'mode': MODE_CODES[obs.mode], 'x': obs.x, 'xdot': obs.xdot, 'z': obs.z,
+                        'zdot': obs.zdot, 'normal_load': obs.normal_load, 'friction': obs.friction}
+            assert row.tolist() == [expected[field] for field in PART_STATE_FIELDS]

@@ -33,7 +33,8 @@ from ..interface.names import joint_names, receipt_frame
 from ..interface.parts_messages import PartsMessages
 from ..interface.topics import ENTITY_CHANGES, RECEIVED_COPIES
 from ..interface.transitions import TransitionEncoder
-from ..physics.dynamics import Event, Observation
+from ..physics.dynamics import Event
+from ..physics.dynamics.model import ObservedParts
 from ..realtime.intake import Received
 from ..sim.stepper import Stepper
 from ._ros import status_name, topic_qos
@@ -90,12 +91,12 @@ class SimulatorOutputs:
             xs, surface.centers, surface.widths, PART_SIZE,
             math.sin(track.vibration_angle) if surface.kind == 'track' else None)
 
-    def publish_state(self, observations: list[Observation], events: Sequence[Sequence[Event]]) -> None:
-        """Publish the state now (every part's observation, in part order), with ``events`` (each part's mode
+    def publish_state(self, observed: ObservedParts, events: Sequence[Sequence[Event]]) -> None:
+        """Publish the state now (every part's outputs, in part order), with ``events`` (each part's mode
         changes since the last time)."""
-        obs = observations[0]
+        obs = observed[0]
         parts = self._parts_messages
-        parts.update(observations)
+        parts.update(observed)
         self._pub_part_poses.publish(parts.poses)
         self._pub_part_states.publish(parts.states)
         transitions = [(event, part) for part, part_events in enumerate(events) if len(part_events)

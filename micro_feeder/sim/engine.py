@@ -381,7 +381,7 @@ class Engine:
     def observe_parts(self) -> list[Observation]:
         """Every part's state now, in part order (as :meth:`observe`)."""
         with self._locked(self._lock):
-            return self.stepper.observe_parts()
+            return list(self.stepper.observe_parts())
 
     def entity_names(self) -> list[str]:
         """Every part's entity name now, in part order."""
@@ -391,7 +391,7 @@ class Engine:
     def observe_entities(self) -> tuple[list[str], list[Observation]]:
         """Every part's entity name and state now, in part order."""
         with self._locked(self._lock):
-            return list(self.stepper.entity_names), self.stepper.observe_parts()
+            return list(self.stepper.entity_names), list(self.stepper.observe_parts())
 
     def strokes(self, t: float | None = None) -> tuple[np.ndarray, Observation]:
         """((3, joints) commanded s, ṡ, s̈ at ``t`` (s; default now), the state now), under the lock; raises

@@ -18,6 +18,7 @@ import numpy as np
 from ..interface.names import part_entity, split_window_id, window_id
 from ..physics.contact import ContactLaw, ContactParams, contact_law
 from ..physics.dynamics import EventList, FeederModel, FeederState, Observation, layout
+from ..physics.dynamics.model import ObservedParts
 from ..physics.particle import ParticleParams
 from ..physics.parts import PartsModel, PartsState
 from ..physics.trajectory import CommandLimits, check_table
@@ -180,9 +181,9 @@ class Stepper:
         """Part 0's outputs now (docs/dynamics.md §4)."""
         return self.model.observe(self.state, self.schedule)
 
-    def observe_parts(self) -> list[Observation]:
-        """Every part's outputs now, in part order."""
-        return self.model.observe_many(self.parts_state.rows, self.schedule)
+    def observe_parts(self) -> ObservedParts:
+        """Every part's outputs now, in part order (an :class:`Observation` per part when indexed)."""
+        return self.model.observe_rows(self.parts_state.rows, self.schedule)
 
     def command_trajectory(self, cmd: TrajectoryCommand) -> float:
         """Apply a checked trajectory: it replaces the schedule from its start time on (the stamp, or now

@@ -78,6 +78,28 @@ class Observation:
     stroke_velocities: np.ndarray
 
 
+class ObservedParts(Sequence[Observation]):
+    """Every part's outputs at one sim time as rows (parts × the output columns of docs/dynamics.md §4, then s
+    per actuator) and stroke rates ṡ (parts × actuators, m/s): what one compiled call gives. Indexing builds one
+    part's :class:`Observation`; a consumer of every part (the simulator's per-tick messages) reads
+    :attr:`rows` instead of building 16 of them a tick."""
+
+    __slots__ = ('rows', 'stroke_velocities')
+
+    def __init__(self, rows: np.ndarray, stroke_velocities: np.ndarray):
+        self.rows, self.stroke_velocities = rows, stroke_velocities
+
+    def __len__(self) -> int:
+        return self.rows.shape[0]
+
+    def __getitem__(self, index: int) -> Observation:      # type: ignore[override]  (no slices)
+        row = self.rows[index]
+        values = row[:layout.N_FIXED_COLUMNS].tolist()
+        values[layout.C_MODE] = MODES[int(values[layout.C_MODE])]        # Observation's fields are in column order
+        return Observation(*values, strokes=row[layout.N_FIXED_COLUMNS:],
+                           stroke_velocities=self.stroke_velocities[index])
+
+
 class FeederState:
     """Everything that evolves: time, mode, kinematic state, piezo state, transition counters.
 
@@ -471,7 +493,7 @@ class FeederModel:
         path = np.zeros(n)
         ons = list(rows.ons)
         collected: dict[int, list[EventList]] = {}
-        for t_until, t_limit, table in self._segments(float(fss[0, layout.FS_T]), t_target, source):
+        for t_until, t_limit, table in self.segments(float(fss[0, layout.FS_T]), t_target, source):
             src, work, records = self._put_on(ys.shape[1], fss, ons, running, table, t_limit)
             counts = np.zeros(n, dtype=np.int64)
             n_ev = k.advance_parts(ys, ivs, fss, aheads, running, status, t_until, t_limit, self._kernel_model, src,
@@ -517,7 +539,7 @@ class FeederModel:
         :func:`.kernel.advance_parts`: None unless one stroke table is in force over the whole span; else the
         rows marked as on it (as :meth:`advance_rows` marks them) and what the kernel takes: its model, the
         stroke source, the time the table stops being valid (s), the work arrays and the output rows."""
-        segments = self._segments(rows.t, t_target, source)
+        segments = self.segments(rows.t, t_target, source)
         if len(segments) != 1:
             return None
         n_y = rows.y.shape[1]
@@ -598,13 +620,12 @@ class FeederModel:
                      source: StrokeTable | StrokeSchedule | None = None) -> list[Observation]:
         """:meth:`observe` of several states at one sim time (the parts on a feeder, or their rows), in one
         compiled call."""
-        rows, stroke_velocities = self._observe_rows(states, source)
-        n_fixed = layout.N_FIXED_COLUMNS
-        observations = []
-        for values, row, velocities in zip(rows[:, :n_fixed].tolist(), rows, stroke_velocities, strict=True):
-            values[layout.C_MODE] = MODES[int(values[layout.C_MODE])]    # Observation's fields are in column order
-            observations.append(Observation(*values, strokes=row[n_fixed:], stroke_velocities=velocities))
-        return observations
+        return list(self.observe_rows(states, source))
+
+    def observe_rows(self, states: Sequence[FeederState] | StateRows,
+                     source: StrokeTable | StrokeSchedule | None = None) -> ObservedParts:
+        """:meth:`observe_many` as rows (:class:`ObservedParts`: an Observation built only for the part asked)."""
+        return ObservedParts(*self._observe_rows(states, source))
 
     # ------------------------------------------------------------------------------------------------
 
@@ -617,8 +638,8 @@ class FeederModel:
             table = stack_tables([table, self.base_acceleration])
         return table
 
-    def _segments(self, t0: float, t1: float, source: StrokeTable | StrokeSchedule | None
-                  ) -> list[tuple[float, float, StrokeTable]]:
+    def segments(self, t0: float, t1: float, source: StrokeTable | StrokeSchedule | None
+                 ) -> list[tuple[float, float, StrokeTable]]:
         """(end time, time the table stops being valid, table) pieces covering (t0, t1] according to the
         schedule."""
         if not isinstance(source, StrokeSchedule):
@@ -659,7 +680,7 @@ class FeederModel:
         packed = self._recording_model if record else self._kernel_model
         events: list[EventList] = []
         recorded: list[np.ndarray] = []
-        for t_until, t_limit, table in self._segments(state.t, t_target, source):
+        for t_until, t_limit, table in self.segments(state.t, t_target, source):
             src = self._source_table(table).as_tuple()
             work = _WORK.arrays(state.y.size, src[0].size)
             ev_i, ev_f, scratch, st, aux, cur = work.ev_i, work.ev_f, work.scratch, work.st, work.aux, work.cur

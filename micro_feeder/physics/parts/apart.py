@@ -72,23 +72,24 @@ def advance_apart(ys: np.ndarray, ivs: np.ndarray, fss: np.ndarray, aheads: np.n
                   trial_ys: np.ndarray, trial_ivs: np.ndarray, trial_fss: np.ndarray, trial_aheads: np.ndarray,
                   running: np.ndarray, status: np.ndarray, counts: np.ndarray, path: np.ndarray,
                   run_max: np.ndarray, part_reach: np.ndarray, reach: np.ndarray, gap0: np.ndarray,
-                  gap1: np.ndarray, ev_i: np.ndarray, ev_f: np.ndarray, out_i: np.ndarray, out_f: np.ndarray, out_part: np.ndarray,
-                  n_out: np.ndarray, rec: np.ndarray, record: int, scratch: np.ndarray, st: np.ndarray,
-                  aux: np.ndarray, cur: np.ndarray) -> int:
+                  gap1: np.ndarray, ev_i: np.ndarray, ev_f: np.ndarray, out_i: np.ndarray, out_f: np.ndarray,
+                  out_count: np.ndarray, trials: np.ndarray, rec: np.ndarray, record: int, scratch: np.ndarray,
+                  st: np.ndarray, aux: np.ndarray, cur: np.ndarray) -> int:
     """Advance the parts' rows (``ys``, ``ivs``, ``fss``, ``aheads``: parts × ..., changed in place) chunk by
     chunk towards ``t_target`` (s) on one stroke table (``src``, valid until ``t_limit``), as
     :meth:`.model.PartsModel._chunk` does, while no two parts touch or meet. ``hint[0]``: the chunk to try
-    next (s; 0: a near chunk), updated. Each taken chunk's events go to ``out_i`` / ``out_f`` with their part
-    in ``out_part`` (``n_out[0]`` of them, chunk after chunk); ``n_out[1]``: the trials made (kept or cut).
+    next (s; 0: a near chunk), updated. Each taken chunk's events of part p go to ``out_i[p]`` / ``out_f[p]``
+    (``out_count[p]`` of them, chunk after chunk); ``trials[0]``: the trials made (kept or cut).
     The ``trial_*`` … ``gap1`` arrays are work space (one row or entry per part), ``ev_i`` … ``cur`` the
     kernel's (:func:`.kernel.advance_parts`).
 
     Returns REACHED, or HANDED_BACK when the next chunk (from the rows' time, with ``hint[0]``) is the Python
     loop's: two parts touch at its start, a gap closes within it, a part's integration stopped (too many
-    events, or a failure the caller reports), or its events would not fit in ``out_i``."""
+    events, or a failure the caller reports), or a part's events would not fit in its row of ``out_i``."""
     n = ys.shape[0]
-    n_out[0] = 0
-    n_out[1] = 0
+    trials[0] = 0
+    for p in range(n):
+        out_count[p] = 0
     while True:
         t = fss[0, FS_T]
         if not t < t_target:
@@ -113,9 +114,9 @@ def advance_apart(ys: np.ndarray, ivs: np.ndarray, fss: np.ndarray, aheads: np.n
                 status[p] = 0
                 counts[p] = 0
                 path[p] = 0.0
-            n_out[1] += 1
-            n_ev = advance_parts(trial_ys, trial_ivs, trial_fss, trial_aheads, running, status, t1, t_limit, model,
-                                 src, ev_i, ev_f, counts, path, rec, record, scratch, st, aux, cur)
+            trials[0] += 1
+            advance_parts(trial_ys, trial_ivs, trial_fss, trial_aheads, running, status, t1, t_limit, model,
+                          src, ev_i, ev_f, counts, path, rec, record, scratch, st, aux, cur)
             chunk = t1 - t
             for p in range(n):
                 if status[p] != DONE:
@@ -136,15 +137,16 @@ def advance_apart(ys: np.ndarray, ivs: np.ndarray, fss: np.ndarray, aheads: np.n
                 t1 = t + cut if cut > near_chunk else near_end(t, near_chunk)
                 continue
             break
-        if n_out[0] + n_ev > out_i.shape[0]:
-            return HANDED_BACK
+        for p in range(n):
+            if out_count[p] + counts[p] > out_i.shape[1]:
+                return HANDED_BACK
         k = 0
         for p in range(n):
             for _ in range(counts[p]):
-                out_i[n_out[0], 0], out_i[n_out[0], 1], out_i[n_out[0], 2] = ev_i[k, 0], ev_i[k, 1], ev_i[k, 2]
-                out_f[n_out[0], 0], out_f[n_out[0], 1] = ev_f[k, 0], ev_f[k, 1]
-                out_part[n_out[0]] = p
-                n_out[0] += 1
+                j = out_count[p]
+                out_i[p, j, 0], out_i[p, j, 1], out_i[p, j, 2] = ev_i[k, 0], ev_i[k, 1], ev_i[k, 2]
+                out_f[p, j, 0], out_f[p, j, 1] = ev_f[k, 0], ev_f[k, 1]
+                out_count[p] += 1
                 k += 1
         _copy_2d(ys, trial_ys)
         _copy_2d(ivs, trial_ivs)

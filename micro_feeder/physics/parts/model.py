@@ -85,6 +85,12 @@ class PartsState:
         """Make ``rows`` the parts' states."""
         self._rows, self._parts = rows, None
 
+    def changed_in_place(self) -> None:
+        """The rows' arrays and ``ons`` were changed in place: the parts (views of the arrays) take ``ons``."""
+        if self._parts is not None:
+            for part, on in zip(self._parts, self._rows.ons, strict=True):
+                part.ahead_on = on
+
     def insert(self, index: int, part: FeederState) -> None:
         """Add ``part`` at ``index`` (its place along the feeder)."""
         self.parts.insert(index, part)
@@ -196,16 +202,20 @@ class PartsModel:
     def advance(self, state: PartsState, t_target: float, source: Source = None) -> list[EventList]:
         """Integrate every part to ``t_target`` (s), impacts included; returns each part's mode changes.
 
+        A chunk ends where the stroke table in force ends (a part alone stops there too), so that one compiled
+        call takes the chunks of each table (the 20-ms windows a streaming actuator sends).
+
         Raises :class:`~micro_feeder.physics.dynamics.SimulationError` as a single part's run does."""
         events: list[list[EventList]] = [[] for _ in range(len(state))]
         self._cascade(state, range(len(state) - 1), True, source, events)     # e.g. a v0 into a touching part
-        while state.t < t_target:
-            if self.compiled_chunks and self._advance_apart(state, t_target, source, events):
-                break
-            t = state.t
-            hint = state.chunk_hint or self.near_chunk
-            t1 = self._near_end(t) if hint <= self.near_chunk else t + hint
-            self._chunk(state, min(t1, t_target), source, events, planned=t1 - t)
+        for t_end, _, _ in self.model.segments(state.t, t_target, source):
+            while state.t < t_end:
+                if self.compiled_chunks and self._advance_apart(state, t_end, source, events):
+                    break
+                t = state.t
+                hint = state.chunk_hint or self.near_chunk
+                t1 = self._near_end(t) if hint <= self.near_chunk else t + hint
+                self._chunk(state, min(t1, t_end), source, events, planned=t1 - t)
         return [EventList.concatenate(part_events) for part_events in events]
 
     def run(self, duration: float | None = None, source: Source = None, output_step: float | None = None
@@ -255,9 +265,9 @@ class PartsModel:
         code = advance_apart(rows.y, rows.iv, rows.fs, rows.ahead, t_target, t_limit, self.size, self.near_chunk,
                              space.hint, model, src, *space.trial, *space.per_part, work.batch_ev_i,
                              work.batch_ev_f, *space.out, records, 0, work.scratch, work.st, work.aux, work.cur)
-        state.take(rows)                            # changed in place: the parts' views are rebuilt from them
+        state.changed_in_place()
         state.chunk_hint = float(space.hint[0])
-        self.trials += int(space.out[3][1])
+        self.trials += int(space.trials[0])
         space.deal(events)
         return code == REACHED
 
@@ -494,29 +504,25 @@ def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
 
 class _ApartWork:
     """:func:`.apart.advance_apart`'s work space for one number of parts and state size, and the events it
-    leaves (``out``: kinds, times and positions, part), dealt to the parts."""
+    leaves (``out``: kinds, times and positions, count, by part), dealt to the parts."""
 
-    EVENTS = 8192           # events of one call (more: the chunk that would overflow is handed back)
+    EVENTS = 1024           # events of one part in one call (more: the chunk that would overflow is handed back)
 
     def __init__(self, n: int, rows: StateRows):
         self.hint = np.zeros(1)
         self.trial = (np.empty_like(rows.y), np.empty_like(rows.iv), np.empty_like(rows.fs), np.empty_like(rows.ahead))
         self.per_part = (np.zeros(n, dtype=np.bool_), np.zeros(n, dtype=np.int64), np.zeros(n, dtype=np.int64),
                          *(np.zeros(n) for _ in range(6)))
-        self.out = (np.zeros((self.EVENTS, 3), dtype=np.int64), np.zeros((self.EVENTS, 2)),
-                    np.zeros(self.EVENTS, dtype=np.int64), np.zeros(2, dtype=np.int64))
+        self.trials = np.zeros(1, dtype=np.int64)
+        self.out = (np.zeros((n, self.EVENTS, 3), dtype=np.int64), np.zeros((n, self.EVENTS, 2)),
+                    np.zeros(n, dtype=np.int64), self.trials)
 
     def deal(self, events: list[list[EventList]]) -> None:
-        """Append the events of the last call to each part's list, in time order."""
-        out_i, out_f, out_part, n_out = self.out
-        n = int(n_out[0])
-        if not n:
-            return
-        order = np.argsort(out_part[:n], kind='stable')
-        parts = out_part[:n][order]
-        bounds = np.flatnonzero(np.diff(parts)) + 1
-        for piece in np.split(order, bounds):
-            events[int(out_part[piece[0]])].append(EventList(out_i[piece], out_f[piece]))
+        """Append the events of the last call to each part's list."""
+        out_i, out_f, out_count, _ = self.out
+        for p in np.flatnonzero(out_count).tolist():
+            count = out_count[p]
+            events[p].append(EventList(out_i[p, :count].copy(), out_f[p, :count].copy()))
 
 
 class _ThreadApartWork(threading.local):
