@@ -126,10 +126,13 @@ class Diagnostics:
         rclpy.shutdown(context=self.context)
 
 
-def run_case(n: int, minutes: float, cpu_target: float) -> dict:
-    common = feeder_args(n)
+def run_case(n: int, minutes: float, cpu_target: float, args: list[str] | None = None, name: str = '') -> dict:
+    """The simulator and the actuator as separate processes for ``minutes`` of continuous strokes, with ``n``
+    actuators (``args``: the ``-p`` arguments of both instead; ``name``: of the logs, default ``soak_{n}``)."""
+    common = args or feeder_args(n)
+    stem = name or f'soak_{n}'
     # logs go to files: a pipe nobody reads blocks a process once ~64 KiB of warnings are waiting in it
-    logs = {name: (LOG_DIR / f'soak_{n}_{name}.log').open('w') for name in ('simulator', 'actuator')}
+    logs = {name: (LOG_DIR / f'{stem}_{name}.log').open('w') for name in ('simulator', 'actuator')}
     sim = subprocess.Popen([str(BIN / 'simulator'), '--ros-args', *common], stdout=logs['simulator'],
                            stderr=subprocess.STDOUT)
     act = subprocess.Popen([str(BIN / 'actuator'), '--ros-args', *common, '-p', 'stroke.count:=0'],
@@ -150,7 +153,7 @@ def run_case(n: int, minutes: float, cpu_target: float) -> dict:
             for name, proc in (('simulator', sim), ('actuator', act)):
                 if proc.poll() is not None:
                     raise RuntimeError(f'the {name} exited ({proc.returncode}) {now - start:.0f} s into the run; '
-                                       f'its log: {LOG_DIR / f"soak_{n}_{name}.log"}')
+                                       f'its log: {LOG_DIR / f"{stem}_{name}.log"}')
             if now >= next_sample:
                 samples.append((now - start, cpu_seconds(sim.pid), cpu_seconds(act.pid), rss_mb(sim.pid),
                                 rss_mb(act.pid)))
@@ -186,7 +189,7 @@ def run_case(n: int, minutes: float, cpu_target: float) -> dict:
         'underruns': latest.get('actuator', {}).get('stream_underruns', '?'),
         'windows': latest.get('actuator', {}).get('windows_sent', '?'),
         'rejected': latest.get('simulator', {}).get('rejected_commands', '?'),
-        'warnings': {name: warnings_in(LOG_DIR / f'soak_{n}_{name}.log') for name in ('simulator', 'actuator')},
+        'warnings': {name: warnings_in(LOG_DIR / f'{stem}_{name}.log') for name in ('simulator', 'actuator')},
     }
 
 
