@@ -1,5 +1,5 @@
 """The simulator's rclpy-free parts: command coalescing, throttled refusal lines, the intake's bounds and
-threads, the loop's grid and pause, the diagnostics function."""
+threads, the loop's grid and pause, the publishing handoff, the diagnostics function."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ import pytest
 from ros_helpers import wait_until
 
 from micro_feeder.realtime.diagnostics import ERROR, OK, WARN, LoopSnapshot, loop_status
+from micro_feeder.realtime.handoff import Handoff
 from micro_feeder.realtime.intake import CommandIntake, Received, ThrottledLog, plan
 from micro_feeder.realtime.loop import TickLoop
 from micro_feeder.sim.commands import start_time
@@ -119,3 +120,33 @@ def test_loop_status_levels_and_values() -> None:
     assert wedged.level == ERROR and 'one tick has been working for 3.0 s' in wedged.message
     assert loop_status(_snapshot(error='SimulationError: x')).message == 'SimulationError: x'
     assert loop_status(_snapshot(periods_ms=np.zeros(0))).values['tick_period_p99_ms'] == 'nan'
+
+
+def test_the_handoff_runs_calls_in_order_on_its_thread_and_flush_waits_for_them() -> None:
+    """The loop hands each tick's publishing over: the calls run in the order given, on one other thread; flush()
+    returns only once every call handed over has finished (a lockstep step or a reset publishes after it); an
+    exception goes to on_error and the calls after it still run; stop() runs what is left first."""
+    done: list[int] = []
+    threads: set[str] = set()
+    errors: list[BaseException] = []
+    release = threading.Event()
+
+    def call(k: int) -> None:
+        if k == 0:
+            release.wait(5.0)               # the first call holds the rest back until released
+        if k == 3:
+            raise RuntimeError('publish failed')
+        threads.add(threading.current_thread().name)
+        done.append(k)
+
+    handoff = Handoff(errors.append, name='test-handoff')
+    for k in range(6):
+        handoff.put(call, k)
+    assert not handoff.flush(timeout=0.05) and done == []    # still held: flush times out
+    release.set()
+    assert handoff.flush(timeout=5.0)
+    assert done == [0, 1, 2, 4, 5] and threads == {'test-handoff'}
+    assert [str(err) for err in errors] == ['publish failed']
+    for k in range(6, 50):
+        handoff.put(call, k)
+    assert handoff.stop(timeout=5.0) and done == [0, 1, 2, 4, 5, *range(6, 50)]

@@ -31,6 +31,7 @@ from ..interface.entity_changes import EntityChange
 from ..physics.dynamics import Event, FeederModel, Observation, SimulationError
 from ..physics.parameters import ParameterError
 from ..realtime.diagnostics import LoopSnapshot, achieved_rtf
+from ..realtime.handoff import Handoff
 from ..realtime.intake import CommandIntake, Received
 from ..realtime.loop import TickLoop
 from .commands import TrajectoryCommand
@@ -103,6 +104,8 @@ class Engine:
                                      max_message_bytes=max_command_bytes, max_queued_bytes=4 * max_command_bytes,
                                      batch_interval=0.5 * period)
         self._loop = None if lockstep else TickLoop(period, self._tick, self._loop_failed)
+        # the loop's ticks publish on a thread of their own (overlapping the next tick's integration)
+        self._handoff = None if lockstep else Handoff(self._publish_failed)
 
     @property
     def stepper(self) -> Stepper:
@@ -124,6 +127,8 @@ class Engine:
         stuck in the physics is left to die with the process)."""
         if self._loop is not None:
             self._loop.stop(timeout=timeout)
+        if self._handoff is not None:
+            self._handoff.stop(timeout=timeout)
         self._intake.stop(timeout=timeout)
 
     def _locked(self, lock: Any) -> Any:
@@ -201,6 +206,8 @@ class Engine:
         """Pause or run the loop; it stays paused after a failure, at the end and in lockstep."""
         was_paused = self.paused
         self.paused = paused or bool(self.error) or self.lockstep or self.stepper.t >= self._t_end
+        if self.paused and not was_paused:
+            self._flush_published()             # paused: the last state is out when this returns
         if was_paused and not self.paused:     # the achieved real-time factor counts from here
             self._window = (time.perf_counter(), self.stepper.t, self.states_published)
         if self._loop is not None:
@@ -216,14 +223,20 @@ class Engine:
             if self.paused:
                 return
             if self.rtf > 0.0:
-                self._step(self.stepper.t + min(elapsed, 2.0 * self._period) * self.rtf)
+                self._step(self.stepper.t + min(elapsed, 2.0 * self._period) * self.rtf, handed_off=True)
             else:
                 deadline = time.perf_counter() + 0.8 * self._period
                 while not self.paused and time.perf_counter() < deadline:
-                    self._step(self.stepper.t + self.step_period)
+                    self._step(self.stepper.t + self.step_period, handed_off=True)
 
     def _loop_failed(self, err: BaseException) -> None:
         self.fail(f'loop thread stopped: {type(err).__name__}: {err}')
+
+    def _publish_failed(self, err: BaseException) -> None:
+        """On the publishing thread: fail on another one (the lock's holder may be waiting for this thread to
+        finish what was handed over)."""
+        threading.Thread(target=self.fail, args=(f'publishing the state failed: {type(err).__name__}: {err}',),
+                         name='simulator-publish-failed', daemon=True).start()
 
     def _grant_step(self) -> tuple[bool, str]:
         if not self.paused or self.error:
@@ -234,15 +247,15 @@ class Engine:
         self._step(self.stepper.t + self.step_period)
         return not self.error, self.error or f't = {self.stepper.t:.9f} s'
 
-    def _step(self, t_target: float) -> None:
-        """Advance to ``t_target`` (never past :meth:`stop_at`'s end) and publish; on a simulation failure
-        pause and report it."""
+    def _step(self, t_target: float, handed_off: bool = False) -> None:
+        """Advance to ``t_target`` (never past :meth:`stop_at`'s end) and publish (``handed_off``: on the publishing
+        thread); on a simulation failure pause and report it."""
         try:
             events = self.stepper.advance_parts(min(t_target, self._t_end))
         except SimulationError as err:
             self.fail(str(err))
             return
-        self._publish_state(events)
+        self._publish_state(events, handed_off)
         self._check_end()
 
     def _check_end(self) -> None:
@@ -251,10 +264,22 @@ class Engine:
             self._set_paused(True)
             self._on_end(self.stepper.t)
 
-    def _publish_state(self, events: Sequence[Sequence[Event]]) -> None:
-        """Publish the state now, with ``events`` (each part's mode changes since the last time)."""
+    def _publish_state(self, events: Sequence[Sequence[Event]], handed_off: bool = False) -> None:
+        """Publish the state now, with ``events`` (each part's mode changes since the last time); ``handed_off``:
+        on the publishing thread, after the states handed to it before (the state is observed here)."""
         self.states_published += 1
-        self._outputs.publish_state(self.stepper.observe_parts(), events)
+        observed = self.stepper.observe_parts()
+        if handed_off and self._handoff is not None:
+            self._handoff.put(self._outputs.publish_state, observed, events)
+            return
+        self._flush_published()
+        self._outputs.publish_state(observed, events)
+
+    def _flush_published(self) -> None:
+        """Wait until the states handed to the publishing thread are out (before publishing on this thread, or
+        changing what publishing uses)."""
+        if self._handoff is not None:
+            self._handoff.flush()
 
     # -- commands -----------------------------------------------------------------------------------
 
@@ -341,6 +366,7 @@ class Engine:
                 self._intake.drain()
                 self.session.install(stepper)
                 self.error = ''
+                self._flush_published()
                 self._outputs.configure(stepper)
                 self._window = (time.perf_counter(), 0.0, self.states_published)
                 installed()
@@ -367,6 +393,7 @@ class Engine:
                 record = change()
             except ValueError as err:
                 return False, str(err)
+            self._flush_published()
             self._outputs.parts_changed(stepper.n_parts, record)
         message = (f'{record.entity} {record.kind} at x = {record.x * 1e3:.6g} mm, t = {record.t:.9f} s: '
                    f'{stepper.n_parts} parts')
