@@ -150,3 +150,20 @@ def test_the_handoff_runs_calls_in_order_on_its_thread_and_flush_waits_for_them(
     for k in range(6, 50):
         handoff.put(call, k)
     assert handoff.stop(timeout=5.0) and done == [0, 1, 2, 4, 5, *range(6, 50)]
+
+
+def test_a_handoff_that_falls_behind_holds_the_caller_back() -> None:
+    """At most max_pending calls wait: put() then waits for room (the loop slows, states never pile up)."""
+    release = threading.Event()
+    handoff = Handoff(lambda err: None, max_pending=3)
+    handoff.put(release.wait, 5.0)              # taken off the queue and running: the queue is empty again
+    wait_until(lambda: not handoff._calls, 5.0)
+    for _ in range(3):
+        handoff.put(time.sleep, 0.0)
+    fourth = threading.Thread(target=handoff.put, args=(time.sleep, 0.0))
+    fourth.start()
+    fourth.join(0.2)
+    assert fourth.is_alive()                    # held back while three wait
+    release.set()
+    fourth.join(5.0)
+    assert not fourth.is_alive() and handoff.flush(timeout=5.0) and handoff.stop()

@@ -17,9 +17,13 @@ from collections.abc import Callable
 
 class Handoff:
     """Runs ``call(*args)`` handed over with :meth:`put` on a thread of its own, in order. An exception a call
-    raises goes to ``on_error`` (on that thread) and the calls after it still run."""
+    raises goes to ``on_error`` (on that thread) and the calls after it still run. At most ``max_pending``
+    calls wait: :meth:`put` then waits for room, so a publisher that cannot keep up slows the loop (its
+    real-time factor says so) instead of piling up states."""
 
-    def __init__(self, on_error: Callable[[BaseException], None], name: str = 'simulator-publish') -> None:
+    def __init__(self, on_error: Callable[[BaseException], None], name: str = 'simulator-publish',
+                 max_pending: int = 8) -> None:
+        self.max_pending = max_pending
         self._calls: collections.deque[tuple[Callable[..., None], tuple]] = collections.deque()
         self._wake = threading.Condition()
         self._running = 0           # calls taken off the queue and not finished
@@ -29,8 +33,9 @@ class Handoff:
         self._thread.start()
 
     def put(self, call: Callable[..., None], *args: object) -> None:
-        """Run ``call(*args)`` after the calls handed over before it."""
+        """Run ``call(*args)`` after the calls handed over before it (once fewer than ``max_pending`` wait)."""
         with self._wake:
+            self._wake.wait_for(lambda: len(self._calls) < self.max_pending or self._stopping)
             self._calls.append((call, args))
             self._wake.notify_all()
 
