@@ -140,7 +140,8 @@ def run(args: argparse.Namespace) -> int:
 
         # paused until the actuator's burst and the recorder are there: the run (and its log) starts at t = 0
         sim = session.add(lambda: Simulator(context=session.context, namespace=ns,
-                                            overrides={**model_flat, 'real_time_factor': args.real_time_factor},
+                                            overrides={**model_flat, 'real_time_factor': args.real_time_factor,
+                                                       'publish_thread': False},     # one process, one GIL
                                             hold=True))
         end = sim.stop_at(args.duration) if args.duration is not None else None   # before the actuator is built
         actuator = session.add(lambda: Actuator(context=session.context, namespace=ns,

@@ -98,7 +98,8 @@ class Simulator(Node):
         self._engine = Engine(self._session, self._outputs, self.get_logger(), lock=self._lock,
                               lockstep=p['lockstep'], rtf=p['real_time_factor'], step_period=p['step_period'],
                               period=1.0 / p['publish_rate'], start_paused=p['start_paused'],
-                              max_command_bytes=p['max_command_bytes'], on_failure=self._publish_diagnostics)
+                              max_command_bytes=p['max_command_bytes'], publish_thread=p['publish_thread'],
+                              on_failure=self._publish_diagnostics)
         for topic, msg_type in COMMAND_TYPES.items():
             self.create_subscription(msg_type, topic, lambda data, t=topic: self._engine.submit(t, data),
                                      topic_qos(topic, COMMAND_QUEUE), raw=True)

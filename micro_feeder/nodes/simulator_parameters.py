@@ -37,6 +37,9 @@ NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
     'max_command_bytes': (ParamSpec('largest command message accepted (serialized size); a larger one is '
                                     'refused unparsed: send long strokes in windows', 'B', ge=1024, le=2 ** 30,
                                     kind='int', read_only=True), 2 ** 20),
+    'publish_thread': (ParamSpec('publish each tick\'s state on a thread of its own, overlapping the next '
+                                 'tick\'s integration (micro-feeder run turns it off: its other nodes share '
+                                 'the process)', kind='bool', read_only=True), True),
 }
 
 

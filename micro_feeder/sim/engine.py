@@ -75,12 +75,13 @@ class Engine:
 
     ``rtf`` (sim s per wall s) and ``step_period`` (s) may change at any time (under the lock); ``period``
     (s) is the loop's. ``start_paused``: the loop waits for :meth:`resume`. ``max_command_bytes``: a larger
-    command is refused unparsed. ``on_failure()``: called after a failure is logged (the node reports it).
+    command is refused unparsed. ``publish_thread``: the loop's ticks publish on a thread of their own.
+    ``on_failure()``: called after a failure is logged (the node reports it).
     """
 
     def __init__(self, session: Session, outputs: Outputs, log: Log, *, lock: threading.RLock, lockstep: bool,
                  rtf: float, step_period: float, period: float, start_paused: bool, max_command_bytes: int,
-                 on_failure: Callable[[], None]):
+                 on_failure: Callable[[], None], publish_thread: bool = True):
         self.session = session
         self._lock = lock
         self.lockstep = lockstep
@@ -104,8 +105,10 @@ class Engine:
                                      max_message_bytes=max_command_bytes, max_queued_bytes=4 * max_command_bytes,
                                      batch_interval=0.5 * period)
         self._loop = None if lockstep else TickLoop(period, self._tick, self._loop_failed)
-        # the loop's ticks publish on a thread of their own (overlapping the next tick's integration)
-        self._handoff = None if lockstep else Handoff(self._publish_failed)
+        # the loop's ticks publish on a thread of their own (overlapping the next tick's integration): 16 parts
+        # hold real time alone in a process (0.96-0.98 -> 0.99), but in a process shared with a recorder the
+        # extra thread's share of the GIL costs more than it overlaps (0.93 -> 0.87-0.89, one part)
+        self._handoff = Handoff(self._publish_failed) if publish_thread and not lockstep else None
 
     @property
     def stepper(self) -> Stepper:
