@@ -266,9 +266,16 @@ class Simulator(Node):
 
     def destroy_node(self) -> None:
         """Stop the loop and intake threads (waiting up to :data:`STOP_TIMEOUT` each for work in
-        progress: a tick stuck in the physics is left to die with the process), then destroy the node."""
+        progress: a tick stuck in the physics is left to die with the process), then destroy the action servers
+        and the node. ``Node.destroy_node`` leaves action servers to the garbage collector, which destroyed one
+        at an arbitrary moment of a later test and deadlocked inside Fast DDS (CI hung)."""
         if self._engine is not None:
             self._engine.stop(timeout=STOP_TIMEOUT)
+        for name in ('_trajectory_action', '_sim_control'):
+            server = getattr(self, name, None)
+            if server is not None:
+                setattr(self, name, None)
+                server.destroy()
         super().destroy_node()
 
     # -- parameters and diagnostics -----------------------------------------------------------------
