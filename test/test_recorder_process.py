@@ -113,3 +113,32 @@ def test_sigterm_and_sigint_leave_a_complete_log(tmp_path, pose_publisher, sig):
     assert (tmp_path / 'log' / 'metadata.yaml').is_file()
     assert recorded_indices(log) == list(range(len(times)))
     assert log.recorder_info['lost_total'] == '0'
+
+
+def test_messages_missed_while_the_recorder_was_stopped_are_counted_lost(tmp_path, pose_publisher):
+    """Stopped (SIGSTOP) for longer than the transport can queue, the recorder misses poses: the middleware's
+    sample-lost count, read by the recorder once a second and at the stop, says how many (the log's
+    ``lost_total``), and what was recorded plus what was counted lost is what was published."""
+    proc = start_recorder(tmp_path / 'log')
+    try:
+        connect(pose_publisher)
+        times = publish_for(pose_publisher, 0.3)
+        proc.send_signal(signal.SIGSTOP)
+        try:
+            times += publish_for(pose_publisher, 3.0)
+        finally:
+            proc.send_signal(signal.SIGCONT)
+        times += publish_for(pose_publisher, 1.5)
+        time.sleep(0.5)
+        proc.send_signal(signal.SIGINT)
+        output, _ = proc.communicate(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 0, output
+    log = LogReader(tmp_path / 'log')
+    got = recorded_indices(log)
+    lost = int(log.recorder_info['lost./particle/pose'])
+    print(f'SIGSTOP 3 s: {len(times)} published, {len(got)} recorded, {lost} counted lost')
+    assert len(got) < len(times), 'the stop was meant to overflow the transport'
+    assert len(got) + lost == len(times)

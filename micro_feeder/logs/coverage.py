@@ -265,7 +265,7 @@ def stall_lines(c: Coverage) -> list[str]:
             f', ending at log time +{s.longest_end_log:.1f} s') if s.longest_end_log is not None else ''
     return [f'recorder   did not run {s.count} time{"s" * (s.count != 1)}, {s.total_s:.1f} s in all{when} (its '
             'process stopped, or its executor busy or starved of CPU): messages published meanwhile may be '
-            'missing, not counted as lost']
+            'missing (counted lost where the middleware dropped them)']
 
 
 def _where(sim: float | None, log_s: float | None) -> str:

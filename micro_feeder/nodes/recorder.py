@@ -6,10 +6,17 @@ publishers offer (transient-local ones too, so latched state is captured) and a 
 burst waits in the queue instead of being dropped); other configured topics are subscribed when they
 appear in the graph. Each message is written with its receive time (wall clock, ns) as log time.
 
-Loss accounting: QoS message-lost and incompatible-QoS events, per topic, published on
+Loss accounting: the DDS sample-lost count and incompatible-QoS events, per topic, published on
 ``/diagnostics`` at 1 Hz (and so recorded too, which keeps them in a truncated log) and stored in the
 log summary on a clean stop. rclpy's EventsExecutor cannot deliver message info (sequence numbers) to
 a callback (``SystemError`` in rclpy 9.1.2), so gaps in a publisher's sequence are not counted.
+
+The sample-lost count is read (:class:`LossCount`) once a second and at the stop, not taken as a QoS
+event callback. A callback makes the middleware call the recorder from its receive thread while it holds
+the reader's lock, and with rmw_fastrtps_shared_cpp 9.3.3 that can deadlock against the executor taking
+the event (ros2/rmw_fastrtps#890, fixed upstream after that release): the recorder then hangs for good and
+ignores SIGINT. Without a callback the middleware only counts, and reading the count takes the two locks
+in one order.
 
 Faults never reach the executor. The log is written on a thread of its own (``logs.background``): a
 failed write (disk full, file too large, I/O error), a removed log directory, a write that does not return
@@ -39,11 +46,13 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor, ParameterType
 from rclpy.context import Context
-from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.event_handler import QoSSubscriptionEventType, SubscriptionEventCallbacks
 from rclpy.exceptions import ParameterException
 from rclpy.experimental import EventsExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.subscription import Subscription
 from rclpy.task import Future
 from std_srvs.srv import Trigger
 
@@ -80,6 +89,27 @@ def default_topics(namespace: str) -> list[str]:
     return [spec.name for spec in TOPICS if namespace == '/' or spec.name != '/clock']
 
 
+class LossCount:
+    """The middleware's count of a subscription's lost messages (DDS sample lost), read on demand.
+
+    Reading takes the count since the last read. No callback is registered for the event, so the
+    middleware never calls into ROS from its receive thread for it (see the module docstring)."""
+
+    def __init__(self, subscription: Subscription) -> None:
+        with subscription.handle:
+            self._event = _rclpy.EventHandle(subscription.handle,
+                                             QoSSubscriptionEventType.RCL_SUBSCRIPTION_MESSAGE_LOST)
+
+    def take(self) -> int:
+        """Messages lost since the last call."""
+        with self._event:
+            info = self._event.take_event()
+        return int(info.total_count_change) if info is not None else 0
+
+    def destroy(self) -> None:
+        self._event.destroy_when_not_in_use()
+
+
 class Recorder(Node):
     """Records topics to an MCAP log; see the module docstring."""
 
@@ -113,6 +143,7 @@ class Recorder(Node):
         self.received: Counter[str] = Counter()
         self.lost: Counter[str] = Counter()
         self.incompatible: Counter[str] = Counter()
+        self._loss_counts: dict[str, LossCount] = {}
         self.stalls: list[tuple[int, float]] = []   # (wall-clock ns when it ended, seconds) per process stall
         self.writer = LogWriter(output, flush_period=p['flush_period'], split_size=p['split_size'],
                                 split_duration=p['split_duration'], stop_on_error=True,
@@ -141,11 +172,11 @@ class Recorder(Node):
     # -- subscriptions --------------------------------------------------------------------------------
     def _subscribe(self, topic: str, type_name: str, qos: QoSProfile) -> None:
         events = SubscriptionEventCallbacks(
-            message_lost=lambda info, t=topic: self.lost.update({t: info.total_count_change}),
             incompatible_qos=lambda info, t=topic: self.incompatible.update({t: info.total_count_change}))
-        self.create_subscription(message_class(type_name), topic,
-                                 lambda data, t=topic, n=type_name: self._on_message(t, n, data),
-                                 qos, raw=True, event_callbacks=events)
+        subscription = self.create_subscription(message_class(type_name), topic,
+                                                lambda data, t=topic, n=type_name: self._on_message(t, n, data),
+                                                qos, raw=True, event_callbacks=events)
+        self._loss_counts[topic] = LossCount(subscription)
 
     def _on_message(self, topic: str, type_name: str, data: bytes) -> None:
         now = time.time_ns()
@@ -172,6 +203,13 @@ class Recorder(Node):
                 del self._pending[name]
 
     # -- counters, flushing, stopping ------------------------------------------------------------------
+    def _count_lost(self) -> None:
+        """Add what the middleware counted lost since the last look (executor or main thread only)."""
+        for topic, count in self._loss_counts.items():
+            n = count.take()
+            if n:
+                self.lost[topic] += n
+
     def counters(self) -> dict[str, str]:
         """The loss counters as string key/values (``/diagnostics`` and the log summary use the same).
         Also called by the writer thread when a fault finishes the log: the counters are copied first
@@ -244,6 +282,8 @@ class Recorder(Node):
                                 values=[KeyValue(key=k, value=v) for k, v in c.items()])
 
     def _publish_diagnostics(self) -> None:
+        if not self._closed:
+            self._count_lost()
         msg = DiagnosticArray(status=[self._status()])
         msg.header.stamp = self.get_clock().now().to_msg()
         self._diagnostics.publish(msg)
@@ -258,7 +298,8 @@ class Recorder(Node):
             self.stalls.append((time.time_ns(), gap))
             self.get_logger().warning(
                 f'the recorder did not run for {gap:.1f} s (its process stopped, or its executor busy or starved of '
-                'CPU): messages published meanwhile may be missing from the log, not counted as lost')
+                'CPU): messages published meanwhile may be missing from the log (counted lost where the middleware '
+                'dropped them)')
         if self._closed:
             return
         self._background.poll()
@@ -290,6 +331,7 @@ class Recorder(Node):
         """Stop recording: write the summary with the counters and ``metadata.yaml``. Idempotent. After a
         fault, reports it (once) instead: the log was finished when it happened."""
         if not self._closed:
+            self._count_lost()
             self._closed = True
             self._background.close()    # a write stuck at the end is a fault too, reported here
             self._report()
@@ -298,6 +340,14 @@ class Recorder(Node):
         if not self.done.done():
             self.done.set_result(True)
         return self.writer.path
+
+    def destroy_node(self) -> None:
+        """Destroys the loss counts' event handles first: left to the garbage collector, one would be
+        destroyed at an arbitrary moment, possibly after its subscription."""
+        for count in self._loss_counts.values():
+            count.destroy()
+        self._loss_counts.clear()
+        super().destroy_node()
 
 
 def _when(stamp_ns: int | None, log_ns: int | None, start_ns: int | None, short: bool = False) -> str:
