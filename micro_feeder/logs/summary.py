@@ -253,8 +253,8 @@ def _loss_lines(s: LogSummary, coverage: Coverage | None = None) -> list[str]:
     where = 'final summary' if s.recorder_source == 'summary' else 'last recorder diagnostics'
     missing = s.start or (coverage is not None and coverage.commands) or ends_early
     verdict = f'{lost} messages lost' if lost or incompatible else 'none while recording' if missing else 'none'
-    lines = [f'loss       {verdict}  (received {int(c.get("received_total", 0)):,}; QoS message-lost events '
-             f'{lost}, incompatible-QoS events {incompatible}; from the {where})']
+    lines = [f'loss       {verdict}  (received {int(c.get("received_total", 0)):,}; counted lost by the '
+             f'middleware {lost}, incompatible-QoS events {incompatible}; from the {where})']
     per_topic = {k.split('.', 1)[1]: v for k, v in c.items() if k.startswith('lost.') and v != '0'}
     lines += [f'           {topic}: {n} lost' for topic, n in sorted(per_topic.items())]
     if ends_early:
