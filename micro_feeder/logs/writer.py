@@ -29,9 +29,10 @@ from pathlib import Path
 
 from mcap.records import Channel, Schema
 from mcap.well_known import MessageEncoding, Profile, SchemaEncoding
-from mcap.writer import CompressionType, Writer
+from mcap.writer import CompressionType
 
 from ..interface.stamps import header_stamp_ns
+from .mcap_fast import FastWriter
 from .mcap_sink import McapSink
 from .metadata import BagMetadata, FileInfo, TopicInfo
 from .schemas import has_header, normalize_type, schema_text
@@ -152,7 +153,7 @@ class LogWriter:
         self._topics: dict[str, _Topic] = {}
         self._files: list[FileInfo] = []
         self._sink: McapSink | None = None
-        self._writer: Writer | None = None
+        self._writer: FastWriter | None = None
         self._schemas: dict[str, int] = {}
         self._last_flush = self._last_check = time.monotonic()
         self._since_size_check = 0
@@ -349,8 +350,8 @@ class LogWriter:
             name = f'{self.path.name}_{len(self._files)}.mcap'
             target = self.path / name
         self._sink = McapSink(target)
-        self._writer = Writer(self._sink, chunk_size=self.chunk_size, compression=CompressionType.ZSTD,
-                              enable_data_crcs=True)  # so that readers detect any changed byte
+        self._writer = FastWriter(self._sink, chunk_size=self.chunk_size, compression=CompressionType.ZSTD,
+                                  enable_data_crcs=True)  # so that readers detect any changed byte
         self._files.append(FileInfo(name))
         self._schemas = {}
         self._safe_chunks = 0
