@@ -116,6 +116,7 @@ class Recorder(Node):
     def __init__(self, *, context: Context | None = None, cli_args: list[str] | None = None,
                  parameter_overrides: list | None = None, node_name: str = 'recorder',
                  namespace: str | None = None) -> None:
+        self._loss_counts: dict[str, LossCount] = {}   # first: destroy_node runs even when __init__ raises
         super().__init__(node_name, context=context, cli_args=cli_args, namespace=namespace,
                          parameter_overrides=parameter_overrides or [])
         self.declare_parameter('output', '', _descriptor(
@@ -143,7 +144,6 @@ class Recorder(Node):
         self.received: Counter[str] = Counter()
         self.lost: Counter[str] = Counter()
         self.incompatible: Counter[str] = Counter()
-        self._loss_counts: dict[str, LossCount] = {}
         self.stalls: list[tuple[int, float]] = []   # (wall-clock ns when it ended, seconds) per process stall
         self.writer = LogWriter(output, flush_period=p['flush_period'], split_size=p['split_size'],
                                 split_duration=p['split_duration'], stop_on_error=True,
