@@ -2,10 +2,11 @@
 
 mcap's ``Writer.add_message`` (1.6.0, pinned in constraints.txt) builds a ``Message`` object and writes it
 field by field (six ``struct.pack`` calls and two seeks), and a chunk's message indexes take two
-``struct.pack`` calls per message. At the 5,000-6,000 messages a second of a one-part run, in the process
-that also runs the simulator's loop (``micro-feeder run --record``), that was about a fifth of the
-process's CPU and held the GIL the loop needs. Here a message is one packed header and its data, and a
-message index one packed header and one array of (log time, offset) pairs.
+``struct.pack`` calls per message. Here a message is one packed header and its data, and a message index
+one packed header and one array of (log time, offset) pairs: 2.2 instead of 5.0 µs of CPU per message,
+compression included. A one-part ``micro-feeder run --record`` writes ~11,000 messages a second in the
+process that also runs the simulator's loop, so this saves ~3 % of a core there (its real-time factor
+did not change measurably).
 
 :class:`FastWriter` is mcap's ``Writer`` for everything else (start, schemas, channels, chunk
 compression and CRCs, the summary); it reaches into the Writer's private state, so it is tied to the
