@@ -13,6 +13,7 @@ import json
 import re
 import subprocess
 import sys
+from collections import Counter
 from pathlib import Path
 
 import pytest
@@ -96,3 +97,41 @@ def test_a_recorded_run_starts_at_sim_time_zero_without_a_stall(tmp_path: Path) 
     running = [p for p in poses if p[0] > 0]                        # the held pose at t = 0 waits, by design
     wall_gaps = [b[1] - a[1] for a, b in itertools.pairwise(running)]
     assert max(wall_gaps) < 50_000_000, max(wall_gaps)
+
+
+def test_run_records_each_tick_of_the_simulators_state_once_as_published(tmp_path: Path) -> None:
+    """``run --record`` records the simulator's per-tick state topics in its process as they are published (not
+    taken back from the middleware): each holds every tick's message once, in order, on the ticks of
+    ``particle/pose``; the recorder's counters and ``info`` name them."""
+    from micro_feeder.logs.reader import LogReader
+    from micro_feeder.nodes.recorder import IN_PROCESS_TOPICS
+
+    log = tmp_path / 'run'
+    run = subprocess.run([*CLI, 'run', '--duration', '1', '--set', 'stroke.count=0', '--record', str(log)],
+                         capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert 'started after' not in run.stderr, run.stderr
+    reader = LogReader(log)
+    ticks = [m.stamp_ns for m in reader.messages(['particle/pose'], decoded=True)]
+    assert ticks[0] == 0 and len(ticks) > 500 and ticks[-1] >= 990_000_000, (len(ticks), ticks[:2], ticks[-2:])
+    running = [t for t in ticks if t > 0]
+    assert all(b > a for a, b in itertools.pairwise(running)), 'a tick recorded twice or out of order'
+    for topic in ('particle/twist', 'particle/contact_wrench', 'actuator/joint_states', 'particles/poses'):
+        assert [m.stamp_ns for m in reader.messages([topic], decoded=True)] == ticks, topic
+    state_times = [round(m.message.data[0] * 1e9) for m in reader.messages(['particles/states'], decoded=True)]
+    assert state_times == ticks
+    # every transition the run counted is in the log, the last tick's too (taken at the stop, not left behind)
+    kinds = Counter(status.message for m in reader.messages(['particle/transitions'], decoded=True)
+                    for status in m.message.status)
+    transitions = re.search(r'transitions\s+(.*)', run.stdout)
+    assert transitions and kinds['stick_to_slip'] > 100, run.stdout
+    assert transitions.group(1) == ', '.join(f'{k} {kinds[k]}' for k in ('stick_to_slip', 'slip_to_stick',
+                                                                           'take_off', 'landing'))
+    counters = reader.recorder_info
+    assert set(counters['recorded_in_process'].split(',')) == {'/' + name.lstrip('/') for name in IN_PROCESS_TOPICS}
+    clock = [round(m.message.clock.sec * 1e9) + m.message.clock.nanosec
+             for m in reader.messages(['/clock'], decoded=True)]
+    assert clock == ticks
+    assert int(counters['received./particle/pose']) == len(ticks) and counters['lost_total'] == '0'
+    info = subprocess.run([*CLI, 'info', str(log)], capture_output=True, text=True, timeout=60, check=True)
+    assert "recorded as published, in the simulator's process" in info.stdout, info.stdout

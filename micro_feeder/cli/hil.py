@@ -53,7 +53,9 @@ def run(args: argparse.Namespace) -> int:
                                             overrides={**flat, 'lockstep': args.lockstep}))
         end = sim.stop_at(args.timeout)     # at once: sim time runs while the other nodes are built
         if session.recorder is not None:     # the log starts before the loop does
-            session.spin(lambda: all(sim.count_subscribers(topic) > 0 for topic in RECORDED_BEFORE_START))
+            in_process = session.recorder.in_process    # recorded as published: no subscription to wait for
+            session.spin(lambda: all(sim.count_subscribers(topic) > 0 or sim.resolve_topic_name(topic) in in_process
+                                     for topic in RECORDED_BEFORE_START))
         controller = session.add(lambda: FeedController(context=session.context, namespace=ns,
                                                         overrides={**flat, 'lockstep': args.lockstep}))
         start = time.perf_counter()

@@ -88,7 +88,7 @@ def _wait_until_ready(session: Any, sim: Any, actuator: Any, whole_burst: bool) 
         out = []
         if actuator.trajectory_subscribers() < 1 + recording:
             out.append('the simulator' + (' and the recorder' if recording else '') + ' on actuator/trajectory')
-        if recording and not sim.outputs_matched():
+        if recording and not sim.outputs_matched(session.recorder.in_process):
             out.append('the recorder on the simulator\'s topics')
         return out
 

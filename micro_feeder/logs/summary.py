@@ -257,6 +257,9 @@ def _loss_lines(s: LogSummary, coverage: Coverage | None = None) -> list[str]:
              f'middleware {lost}, incompatible-QoS events {incompatible}; from the {where})']
     per_topic = {k.split('.', 1)[1]: v for k, v in c.items() if k.startswith('lost.') and v != '0'}
     lines += [f'           {topic}: {n} lost' for topic, n in sorted(per_topic.items())]
+    if c.get('recorded_in_process'):
+        lines.append(f'           recorded as published, in the simulator\'s process (not through the middleware): '
+                     f'{", ".join(c["recorded_in_process"].split(","))}')
     if ends_early:
         lines.append('           counted only up to where the log ends (ends, above): nothing after that is counted')
     return lines + _start_lines(s.start, coverage)

@@ -29,6 +29,15 @@ printing the summary of what is readable. A recorder that did not run for more t
 when it runs again: what was published meanwhile may be missing, and it is counted in the ``stalls`` keys of
 its counters.
 
+In one process with the simulator (``micro-feeder run --record``), the simulator's state topics
+(:data:`IN_PROCESS_TOPICS`, ~11,000 messages a second for one part under 1 kHz strokes) are recorded where
+they are published (:meth:`Recorder.record_in_process`) instead of through a subscription: the process has
+one GIL, and taking each message back from the middleware on the executor cost the simulator's loop its
+real-time factor. Their log time is then the publish time, and nothing can be lost between publisher and
+log. Only the one publisher of each such topic (the twin guard refuses a second simulator of the same name;
+``/clock`` is the root namespace simulator's) is recorded that way; every other topic, and every other
+process's messages, still come through subscriptions.
+
 Use as a program (``recorder --ros-args -p output:=out/run1``: stops cleanly on SIGINT, SIGTERM or the
 ``~/stop`` service, ``/recorder/stop`` by default) or in-process: ``r = Recorder(context=ctx)``, add it to
 an executor that runs on the main thread, spin, then ``r.close()``.
@@ -40,7 +49,9 @@ import datetime
 import sys
 import time
 from collections import Counter
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -52,6 +63,7 @@ from rclpy.experimental import EventsExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import serialize_message
 from rclpy.subscription import Subscription
 from rclpy.task import Future
 from std_srvs.srv import Trigger
@@ -71,6 +83,11 @@ DIAGNOSTICS_PERIOD = 1.0  # s
 DISCOVERY_PERIOD = 1.0  # s
 WATCH_PERIOD = 0.25  # s between two looks at the writer thread (faults, stalls)
 STALL_REPORT = 2.0  # s: a longer gap between two looks means the recorder process itself was stopped
+# The simulator's state topics (every tick, or at every mode change), which it alone publishes: recorded
+# in-process when the recorder shares a process with the simulator (Recorder.record_in_process).
+IN_PROCESS_TOPICS = ('particle/pose', 'particle/twist', 'particle/contact_wrench', 'actuator/joint_states',
+                     'particles/poses', 'particles/states', 'particle/contact_state', 'particle/transitions',
+                     'particles/transitions', '/clock')
 
 
 def _descriptor(description: str, type_: int, *, float_range: tuple[float, float] | None = None,
@@ -117,6 +134,9 @@ class Recorder(Node):
                  parameter_overrides: list | None = None, node_name: str = 'recorder',
                  namespace: str | None = None) -> None:
         self._loss_counts: dict[str, LossCount] = {}   # first: destroy_node runs even when __init__ raises
+        self._subscriptions_by_topic: dict[str, Subscription] = {}
+        self._types: dict[str, str] = {}     # absolute topic name -> type name, of the topics subscribed
+        self.in_process: set[str] = set()    # absolute names of the topics recorded where they are published
         super().__init__(node_name, context=context, cli_args=cli_args, namespace=namespace,
                          parameter_overrides=parameter_overrides or [])
         self.declare_parameter('output', '', _descriptor(
@@ -177,6 +197,52 @@ class Recorder(Node):
                                                 lambda data, t=topic, n=type_name: self._on_message(t, n, data),
                                                 qos, raw=True, event_callbacks=events)
         self._loss_counts[topic] = LossCount(subscription)
+        self._subscriptions_by_topic[topic] = subscription
+        self._types[topic] = type_name
+
+    def record_in_process(self, node: Node) -> list[str]:
+        """Record ``node``'s publishers of :data:`IN_PROCESS_TOPICS` (a simulator in this process, built after
+        the recorder and before it publishes them) where they publish, instead of through this recorder's
+        subscriptions, which are destroyed. Returns the absolute names of the topics taken over."""
+        wanted = {self.resolve_topic_name(name): name for name in IN_PROCESS_TOPICS}
+        taken = []
+        for publisher in node.publishers:
+            topic = publisher.topic_name
+            subscription = self._subscriptions_by_topic.get(topic)
+            if topic not in wanted or subscription is None or topic in self.in_process:
+                continue
+            self._take_waiting(topic, self._types[topic], subscription)
+            self._loss_counts.pop(topic).destroy()
+            self.destroy_subscription(self._subscriptions_by_topic.pop(topic))
+            self.in_process.add(topic)
+            publisher.publish = self._recording(publisher.publish, topic, TOPICS_BY_NAME[wanted[topic]].type,
+                                                dump_qos([qos_to_dict(publisher.qos_profile)]))
+            taken.append(topic)
+        return taken
+
+    def _take_waiting(self, topic: str, type_name: str, subscription: Subscription) -> None:
+        """Record what ``subscription`` received and the executor has not taken yet: before it is destroyed
+        (the state at t = 0 a simulator publishes as it is built), and at the stop (what the last tick
+        published before ``run`` ended: its transitions were missing from the log)."""
+        with subscription.handle:
+            while (taken := subscription.handle.take_message(subscription.msg_type, True)) is not None:
+                self._on_message(topic, type_name, taken[0])
+
+    def _recording(self, publish: Callable[[Any], None], topic: str, type_name: str,
+                   offered_qos: str) -> Callable[[Any], None]:
+        """``publish`` that also records what it publishes (CDR bytes, or a message serialized here)."""
+        background, received = self._background, self.received
+
+        def publish_and_record(msg: Any) -> None:
+            publish(msg)
+            now = time.time_ns()
+            if self._closed:
+                return
+            if topic not in received:
+                background.add_topic(topic, type_name, offered_qos)
+            received[topic] += 1
+            background.write(topic, msg if isinstance(msg, bytes) else serialize_message(msg), now)
+        return publish_and_record
 
     def _on_message(self, topic: str, type_name: str, data: bytes) -> None:
         now = time.time_ns()
@@ -228,6 +294,8 @@ class Recorder(Node):
             longest_end, longest = max(stalls, key=lambda s: s[1])
             c.update({'stalls': str(len(stalls)), 'stalled_s': f'{sum(s for _, s in stalls):.3f}',
                       'longest_stall_s': f'{longest:.3f}', 'longest_stall_end_ns': str(longest_end)})
+        if self.in_process:
+            c['recorded_in_process'] = ','.join(sorted(self.in_process))
         if self._background.dropped:
             c['not_recorded'] = str(self._background.dropped)   # received after the recording stopped
         return c
@@ -331,6 +399,8 @@ class Recorder(Node):
         """Stop recording: write the summary with the counters and ``metadata.yaml``. Idempotent. After a
         fault, reports it (once) instead: the log was finished when it happened."""
         if not self._closed:
+            for topic, subscription in self._subscriptions_by_topic.items():
+                self._take_waiting(topic, self._types[topic], subscription)
             self._count_lost()
             self._closed = True
             self._background.close()    # a write stuck at the end is a fault too, reported here

@@ -26,7 +26,7 @@ from __future__ import annotations
 import sys
 import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from copy import deepcopy
 from typing import Any
 
@@ -259,10 +259,11 @@ class Simulator(Node):
         """((3, joints) commanded s, ṡ, s̈ at ``t`` (s; default now), the state now); raises :class:`Busy`."""
         return self._engine.strokes(t)
 
-    def outputs_matched(self) -> bool:
+    def outputs_matched(self, recorded_in_process: Collection[str] = ()) -> bool:
         """True when every state topic the simulator publishes has at least one subscription matched (a
-        recorder that has not yet matched a topic would miss its first messages)."""
-        return self._outputs.matched()
+        recorder that has not yet matched a topic would miss its first messages), not counting the topics
+        ``recorded_in_process`` (absolute names) by a recorder in this process."""
+        return self._outputs.matched(recorded_in_process)
 
     def destroy_node(self) -> None:
         """Stop the loop and intake threads (waiting up to :data:`STOP_TIMEOUT` each for work in

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from typing import Any
 
 import numpy as np
@@ -151,10 +151,11 @@ class SimulatorOutputs:
                 t, receipt_frame(received.topic, received.command_id), self._command_status_name,
                 received.topic, received.command_id, refusal))
 
-    def matched(self) -> bool:
+    def matched(self, recorded_in_process: Collection[str] = ()) -> bool:
         """True when every state topic has at least one subscription matched (a recorder that has not yet
-        matched a topic would miss its first messages)."""
-        return all(pub.get_subscription_count() > 0 for pub in
+        matched a topic would miss its first messages), not counting the topics ``recorded_in_process``
+        (absolute names)."""
+        return all(pub.get_subscription_count() > 0 or pub.topic_name in recorded_in_process for pub in
                    (self._pub_pose, self._pub_twist, self._pub_wrench, self._pub_joints, self._pub_mode,
                     self._pub_transitions, self._pub_markers, self.parameters, self._pub_receipts,
                     self._pub_part_poses, self._pub_part_states, self._pub_part_transitions,
