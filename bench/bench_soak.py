@@ -365,6 +365,8 @@ def main() -> None:
                         help='cases to run: actuator counts (of 1, 16, 64) and run (micro-feeder run --record)')
     results_json.add_arguments(parser, 'bench_soak')
     args = parser.parse_args()
+    if args.cases == 'run' and args.json == results_json.RESULTS / 'bench_soak.json':
+        args.json = results_json.RESULTS / 'bench_soak_run.json'    # its own page section, not the soak's
     LOG_DIR.mkdir(parents=True, exist_ok=True)
     load = [round(x, 2) for x in os.getloadavg()]
     started = time.perf_counter()
@@ -385,8 +387,10 @@ def main() -> None:
              else 'Continuous strokes (soak)')
     results_json.save(args, 'bench_soak', title, figures, load_before=load,
                       seconds=time.perf_counter() - started,
-                      purpose='stroke.count 0, streamed by the actuator to the simulator at 1 kHz, separate '
-                              'processes, for minutes: real-time factor, CPU, memory growth, underruns.')
+                      purpose='stroke.count 0, streamed by the actuator to the simulator at 1 kHz, ' +
+                              ('in one process with the recorder (micro-feeder run --record), then resim of its log'
+                               if args.cases == 'run' else 'separate processes') +
+                              ', for minutes: real-time factor, CPU, memory growth, underruns.')
 
 
 if __name__ == '__main__':
