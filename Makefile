@@ -34,7 +34,7 @@ lint: $(STAMP) $(INTERFACES)
 	$(BIN)/lint-imports --no-cache
 
 test: lint foxglove-client $(INTERFACES)
-	$(BIN)/python -m pytest test -m 'not paths and not slow'
+	$(BIN)/python -m pytest test -m 'not paths and not fresh_cache'
 
 # The real Foxglove WebSocket client the live-view tests use (npm, pinned by package-lock.json; node >= 18).
 FOXGLOVE_CLIENT := test/foxglove_client

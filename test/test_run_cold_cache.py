@@ -21,7 +21,7 @@ from micro_feeder.logs.summary import format_summary, summarize, tick_length
 MAX_GAP = 0.050     # s: largest wall gap allowed between two consecutive poses as the recorder logged them
 
 
-@pytest.mark.slow
+@pytest.mark.fresh_cache
 @pytest.mark.timeout(1200)
 def test_run_on_a_fresh_numba_cache_starts_at_zero_without_a_stall(tmp_path: Path) -> None:
     env = {**os.environ, 'NUMBA_CACHE_DIR': str(tmp_path / 'numba-cache')}
