@@ -81,7 +81,7 @@ class RosSession:
         except (ParameterError, ValueError, FileExistsError, SimulationError, NodeRefused) as err:
             raise CommandError(str(err)) from err
         self.nodes.append(node)
-        if self.recorder is not None:      # the simulator's per-tick topics, recorded as they are published
+        if self.recorder is not None:      # the simulator's state topics, recorded as they are published
             self.recorder.record_in_process(node)
         if self.viewer is not None:
             self.viewer.tap(node)

@@ -134,8 +134,7 @@ class Recorder(Node):
                  parameter_overrides: list | None = None, node_name: str = 'recorder',
                  namespace: str | None = None) -> None:
         self._loss_counts: dict[str, LossCount] = {}   # first: destroy_node runs even when __init__ raises
-        self._subscriptions_by_topic: dict[str, Subscription] = {}
-        self._types: dict[str, str] = {}     # absolute topic name -> type name, of the topics subscribed
+        self._topic_subscriptions: dict[str, tuple[Subscription, str]] = {}   # absolute topic -> (subscription, type)
         self.in_process: set[str] = set()    # absolute names of the topics recorded where they are published
         super().__init__(node_name, context=context, cli_args=cli_args, namespace=namespace,
                          parameter_overrides=parameter_overrides or [])
@@ -197,28 +196,24 @@ class Recorder(Node):
                                                 lambda data, t=topic, n=type_name: self._on_message(t, n, data),
                                                 qos, raw=True, event_callbacks=events)
         self._loss_counts[topic] = LossCount(subscription)
-        self._subscriptions_by_topic[topic] = subscription
-        self._types[topic] = type_name
+        self._topic_subscriptions[topic] = (subscription, type_name)
 
     def record_in_process(self, node: Node) -> list[str]:
         """Record ``node``'s publishers of :data:`IN_PROCESS_TOPICS` (a simulator in this process, built after
         the recorder and before it publishes them) where they publish, instead of through this recorder's
-        subscriptions, which are destroyed. Returns the absolute names of the topics taken over."""
-        wanted = {self.resolve_topic_name(name): name for name in IN_PROCESS_TOPICS}
-        taken = []
+        subscriptions, which are destroyed."""
+        wanted = {self.resolve_topic_name(name) for name in IN_PROCESS_TOPICS}
         for publisher in node.publishers:
             topic = publisher.topic_name
-            subscription = self._subscriptions_by_topic.get(topic)
-            if topic not in wanted or subscription is None or topic in self.in_process:
+            if topic not in wanted or topic not in self._topic_subscriptions:
                 continue
-            self._take_waiting(topic, self._types[topic], subscription)
+            subscription, type_name = self._topic_subscriptions.pop(topic)
+            self._take_waiting(topic, type_name, subscription)
             self._loss_counts.pop(topic).destroy()
-            self.destroy_subscription(self._subscriptions_by_topic.pop(topic))
+            self.destroy_subscription(subscription)
             self.in_process.add(topic)
-            publisher.publish = self._recording(publisher.publish, topic, TOPICS_BY_NAME[wanted[topic]].type,
+            publisher.publish = self._recording(publisher.publish, topic, type_name,
                                                 dump_qos([qos_to_dict(publisher.qos_profile)]))
-            taken.append(topic)
-        return taken
 
     def _take_waiting(self, topic: str, type_name: str, subscription: Subscription) -> None:
         """Record what ``subscription`` received and the executor has not taken yet: before it is destroyed
@@ -231,26 +226,23 @@ class Recorder(Node):
     def _recording(self, publish: Callable[[Any], None], topic: str, type_name: str,
                    offered_qos: str) -> Callable[[Any], None]:
         """``publish`` that also records what it publishes (CDR bytes, or a message serialized here)."""
-        background, received = self._background, self.received
-
         def publish_and_record(msg: Any) -> None:
             publish(msg)
-            now = time.time_ns()
-            if self._closed:
-                return
-            if topic not in received:
-                background.add_topic(topic, type_name, offered_qos)
-            received[topic] += 1
-            background.write(topic, msg if isinstance(msg, bytes) else serialize_message(msg), now)
+            self._on_message(topic, type_name, msg if isinstance(msg, bytes) else serialize_message(msg),
+                             offered_qos)
         return publish_and_record
 
-    def _on_message(self, topic: str, type_name: str, data: bytes) -> None:
+    def _on_message(self, topic: str, type_name: str, data: bytes, offered_qos: str | None = None) -> None:
+        """Record one message at its receive (or publish) time; ``offered_qos``: the publishers' QoS for a
+        topic's first message (None: asked of the graph)."""
         now = time.time_ns()
         if self._closed:
             return
         if topic not in self.received:
-            offered = [qos_to_dict(info.qos_profile) for info in self.get_publishers_info_by_topic(topic)]
-            self._background.add_topic(topic, type_name, dump_qos(offered))
+            if offered_qos is None:
+                offered_qos = dump_qos([qos_to_dict(info.qos_profile)
+                                        for info in self.get_publishers_info_by_topic(topic)])
+            self._background.add_topic(topic, type_name, offered_qos)
         self.received[topic] += 1
         self._background.write(topic, data, now)
 
@@ -399,8 +391,8 @@ class Recorder(Node):
         """Stop recording: write the summary with the counters and ``metadata.yaml``. Idempotent. After a
         fault, reports it (once) instead: the log was finished when it happened."""
         if not self._closed:
-            for topic, subscription in self._subscriptions_by_topic.items():
-                self._take_waiting(topic, self._types[topic], subscription)
+            for topic, (subscription, type_name) in self._topic_subscriptions.items():
+                self._take_waiting(topic, type_name, subscription)
             self._count_lost()
             self._closed = True
             self._background.close()    # a write stuck at the end is a fault too, reported here
