@@ -9,7 +9,7 @@ import time
 import numpy as np
 import pytest
 from builtin_interfaces.msg import Duration
-from hypothesis import HealthCheck, given, settings
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import Header
@@ -122,6 +122,7 @@ def _outcome(parse, *args):
 
 @settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(trajectories())
+@example(JointTrajectory(joint_names=['piezo_0'], points=[JointTrajectoryPoint(positions=[0.0, 0.0])]))
 def test_every_layout_parses_from_bytes_as_from_the_message(msg: JointTrajectory) -> None:
     """Whatever fields the points carry, reading the bytes gives the command (or the refusal) rclpy's
     deserialization followed by parse_trajectory gives."""

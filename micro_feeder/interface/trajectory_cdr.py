@@ -98,7 +98,7 @@ def decode(data: bytes, max_points: int) -> Decoded | None:
     if n_points == 0 or n_points > max_points:
         return Decoded(stamp, names, n_points, None, frame_id)
     try:
-        records = _read_points(body, p, n_points)
+        records = _read_points(body, p, n_points, len(names))
     except struct.error:
         records = None
     return Decoded(stamp, names, n_points, records, frame_id)
@@ -132,13 +132,16 @@ def _full_point(n: int) -> np.dtype:
     return _point_layout(4, n, (True, True, True))
 
 
-def _read_points(body: memoryview, p: int, n_points: int) -> dict[str, np.ndarray] | None:
+def _read_points(body: memoryview, p: int, n_points: int, n_joints: int) -> dict[str, np.ndarray] | None:
     """The points at ``p`` as columns (``sec``, ``nanosec``, and ``pos``, ``vel``, ``acc`` (points × joints)
-    for the fields they carry), when every point has positions of the same n > 0 joints, each other field
-    either n values on every point or none, and no effort; else None. Read from the bytes with numpy: the
+    for the fields they carry), when every point has positions of the message's ``n_joints`` > 0 joints,
+    each other field either that many values on every point or none, and no effort; else None (the caller
+    deserializes such a message, and its checks say what is wrong). Read from the bytes with numpy: the
     first one or two points on their own (their padding depends on where they start), the rest as one
     run of identical records."""
     n = struct.unpack_from('<I', body, p)[0]
+    if n != n_joints:
+        return None
     q, present = p, []
     for _field in KNOT_FIELDS:                      # the first point says which fields the points carry
         (count,) = struct.unpack_from('<I', body, q)
