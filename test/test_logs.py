@@ -176,6 +176,20 @@ def test_summary_export_and_plot(tmp_path):
     assert png.read_bytes()[:8] == b'\x89PNG\r\n\x1a\n' and png.stat().st_size > 10_000
 
 
+def test_info_paces_the_run_from_its_first_moving_pose_not_from_the_held_start(tmp_path):
+    """The simulator publishes its held pose at t = 0 when it is built, and the loop starts later (here 0.5 s
+    of start-up): a run that then kept real time for 1 s reads 1.00 × real time, not 1 s / 1.5 s."""
+    writer = LogWriter(tmp_path / 'log')
+    writer.add_topic('/particle/pose', 'geometry_msgs/msg/PoseStamped')
+    writer.write('/particle/pose', serialize_message(pose(0)), T0)
+    for i in range(1, 1001):
+        writer.write('/particle/pose', serialize_message(pose(i)), T0 + 500_000_000 + i * 1_000_000)
+    writer.close()
+    summary = summarize(LogReader(tmp_path / 'log'))
+    assert summary.part.real_time_factor == pytest.approx(1.0)
+    assert '(particle/pose stamps, 1.00 × real time)' in format_summary(summary)
+
+
 def test_message_is_decoded_once(tmp_path):
     write_motion_log(tmp_path / 'log', n=3)
     m = next(LogReader(tmp_path / 'log').messages(['particle/pose']))

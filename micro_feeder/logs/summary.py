@@ -12,6 +12,8 @@ simulator says it received (its ``simulator/command_receipts``, one per command,
 from __future__ import annotations
 
 import datetime
+import itertools
+import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -19,7 +21,7 @@ from ..interface.entity_changes import SPAWNED, read_entity_changes
 from ..interface.topics import COMMAND_TOPICS, ENTITY_CHANGES
 from ..physics.dynamics import MODES
 from .coverage import Coverage, end_line, missing_command_lines, stall_lines
-from .reader import LogReader
+from .reader import LogMessage, LogReader
 from .sim_parameters import recorded_parameters, run_mode
 
 RECORDER_STATUS_PREFIX = 'recorder'
@@ -50,6 +52,8 @@ class PartState:
     mode: str | None = None
     first_stamp: float | None = None
     first_x: float | None = None
+    real_time_factor: float | None = None   # sim time over log time, from the first pose after the held start
+
 
 
 @dataclass
@@ -187,6 +191,7 @@ def summarize(log: LogReader) -> LogSummary:
         part.stamp, part.x, part.z = (pose.stamp_ns or 0) * 1e-9, p.x, p.z
         first = log.first('particle/pose')
         part.first_stamp, part.first_x = (first.stamp_ns or 0) * 1e-9, first.message.pose.position.x
+        part.real_time_factor = _pace(log, first, pose)
     state = log.last('particle/contact_state')
     if state is not None:
         part.mode = state.message.data
@@ -200,6 +205,17 @@ def summarize(log: LogReader) -> LogSummary:
     return LogSummary(log.path, log.files, sum(f.stat().st_size for f in log.files), log.truncated,
                       log.start_ns, log.duration, rows, part, simulator_run(log), counters, source,
                       missing_start(log, part, counters), parts, changes)
+
+
+def _pace(log: LogReader, first: LogMessage, last: LogMessage) -> float | None:
+    """Sim time per log time between the first pose past the first one's stamp and the last pose; None when
+    the poses never move on. The simulator publishes its held start (t = 0) when it is built, before the
+    loop runs: measured from it, the pace would count the start-up as time the run fell behind."""
+    moving = next((m for m in itertools.islice(log.messages(['particle/pose']), 1000)
+                   if (m.stamp_ns or 0) > (first.stamp_ns or 0)), None)
+    if moving is None or last.log_time_ns <= moving.log_time_ns:
+        return None
+    return ((last.stamp_ns or 0) - (moving.stamp_ns or 0)) / (last.log_time_ns - moving.log_time_ns)
 
 
 def _entity_changes(log: LogReader) -> dict[str, int]:
@@ -258,8 +274,9 @@ def _loss_lines(s: LogSummary, coverage: Coverage | None = None) -> list[str]:
     per_topic = {k.split('.', 1)[1]: v for k, v in c.items() if k.startswith('lost.') and v != '0'}
     lines += [f'           {topic}: {n} lost' for topic, n in sorted(per_topic.items())]
     if c.get('recorded_in_process'):
-        lines.append(f'           recorded as published, in the simulator\'s process (not through the middleware): '
-                     f'{", ".join(c["recorded_in_process"].split(","))}')
+        lines += textwrap.wrap('recorded as published, in the simulator\'s process (not through the middleware): '
+                               + ', '.join(c['recorded_in_process'].split(',')), width=110,
+                               initial_indent=' ' * 11, subsequent_indent=' ' * 13, break_on_hyphens=False)
     if ends_early:
         lines.append('           counted only up to where the log ends (ends, above): nothing after that is counted')
     return lines + _start_lines(s.start, coverage)
@@ -339,7 +356,8 @@ def _simulator_lines(s: LogSummary) -> list[str]:
     if p.stamp is not None and p.first_stamp is not None:
         span = p.stamp - p.first_stamp
         stepped = s.simulator.mode == 'stepped'
-        rtf = f', {span / s.duration:.2f} × real time' if s.duration > 0 and span > 0 and not stepped else ''
+        pace = p.real_time_factor
+        rtf = f', {pace:.2f} × real time' if pace and span > 0 and not stepped else ''
         lines.append(f'sim time   {p.first_stamp:.6f} – {p.stamp:.6f} s (particle/pose stamps{rtf})')
     run = s.simulator
     if run.mode != 'unknown':

@@ -218,9 +218,13 @@ class Recorder(Node):
     def _take_waiting(self, topic: str, type_name: str, subscription: Subscription) -> None:
         """Record what ``subscription`` received and the executor has not taken yet: before it is destroyed
         (the state at t = 0 a simulator publishes as it is built), and at the stop (what the last tick
-        published before ``run`` ended: its transitions were missing from the log)."""
+        published before ``run`` ended: its transitions were missing from the log). At most one queue's
+        depth: a sender that keeps publishing cannot hold the stop here."""
         with subscription.handle:
-            while (taken := subscription.handle.take_message(subscription.msg_type, True)) is not None:
+            for _ in range(max(subscription.qos_profile.depth, 1)):
+                taken = subscription.handle.take_message(subscription.msg_type, True)
+                if taken is None:
+                    break
                 self._on_message(topic, type_name, taken[0])
 
     def _recording(self, publish: Callable[[Any], None], topic: str, type_name: str,
