@@ -50,6 +50,9 @@ def validate(flat: dict[str, Any], controller: bool = False) -> None:
         raise CommandError(str(err)) from err
 
 
+READY_TIMEOUT = 10.0  # s (wall clock) a command waits at t = 0 for its nodes and recorder to hear each other
+
+
 class RosSession:
     """What a command builds its nodes with; see :func:`ros_session`."""
 
@@ -86,6 +89,11 @@ class RosSession:
         if self.viewer is not None:
             self.viewer.tap(node)
         return node
+
+    def recorder_hears(self, sim: Any) -> bool:
+        """True without a recorder, else once it hears every state topic of the simulator ``sim``: through a
+        matched subscription, or where the topic is published (:meth:`Recorder.record_in_process`)."""
+        return self.recorder is None or sim.outputs_matched(self.recorder.in_process)
 
     def spin(self, done: Callable[[], bool], future: Any = None) -> None:
         """Spin every node in the session's EventsExecutor until ``done()`` or Ctrl-C/SIGTERM; ``future`` (an

@@ -9,16 +9,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from typing import Any
 
 from . import CommandError
 from ._common import add_model_options, settings_from_args
 from ._foxglove import add_foxglove_option, live_view
-from ._session import add_namespace_option, namespace, ros_session, validate
-
-# With --record, the controller starts once the recorder subscribes to these (so the log holds every state).
-RECORDED_BEFORE_START = ('particle/pose', 'particle/twist', 'actuator/trajectory', 'simulator/command_receipts')
+from ._session import READY_TIMEOUT, add_namespace_option, namespace, ros_session, validate
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -52,10 +50,15 @@ def run(args: argparse.Namespace) -> int:
         sim = session.add(lambda: Simulator(context=session.context, namespace=ns,
                                             overrides={**flat, 'lockstep': args.lockstep}))
         end = sim.stop_at(args.timeout)     # at once: sim time runs while the other nodes are built
-        if session.recorder is not None:     # the log starts before the loop does
-            in_process = session.recorder.in_process    # recorded as published: no subscription to wait for
-            session.spin(lambda: all(sim.count_subscribers(topic) > 0 or sim.resolve_topic_name(topic) in in_process
-                                     for topic in RECORDED_BEFORE_START))
+        if session.recorder is not None:     # the log starts before the loop does: the recorder hears the
+            # simulator, and actuator/trajectory has its subscription besides the simulator's
+            def heard() -> bool:
+                return session.recorder_hears(sim) and sim.count_subscribers('actuator/trajectory') > 1
+            deadline = time.monotonic() + READY_TIMEOUT
+            session.spin(lambda: heard() or time.monotonic() > deadline)
+            if not heard() and not session.stop:
+                print(f'micro-feeder hil: started after {READY_TIMEOUT:g} s without the recorder on every topic: '
+                      'the log may miss the first messages', file=sys.stderr)
         controller = session.add(lambda: FeedController(context=session.context, namespace=ns,
                                                         overrides={**flat, 'lockstep': args.lockstep}))
         start = time.perf_counter()

@@ -17,10 +17,9 @@ from typing import Any, TextIO
 from . import CommandError
 from ._common import add_model_options, settings_from_args
 from ._foxglove import add_foxglove_option, live_view
-from ._session import add_namespace_option, namespace, ros_session, validate
+from ._session import READY_TIMEOUT, add_namespace_option, namespace, ros_session, validate
 
 STATUS_PERIOD = 0.2   # s (wall clock) between two status line updates
-READY_TIMEOUT = 10.0  # s (wall clock) the run waits at t = 0 for its actuator and recorder
 READY_POLL = 0.002    # s (wall clock) between two checks of what the run waits for at t = 0
 
 
@@ -88,7 +87,7 @@ def _wait_until_ready(session: Any, sim: Any, actuator: Any, whole_burst: bool) 
         out = []
         if actuator.trajectory_subscribers() < 1 + recording:
             out.append('the simulator' + (' and the recorder' if recording else '') + ' on actuator/trajectory')
-        if recording and not sim.outputs_matched(session.recorder.in_process):
+        if not session.recorder_hears(sim):
             out.append('the recorder on the simulator\'s topics')
         return out
 
