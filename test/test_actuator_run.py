@@ -48,8 +48,9 @@ def test_run_moves_the_part_as_far_as_simulate(stroke: list[str], tmp_path: Path
 
 
 def test_continuous_strokes_in_run_are_the_offline_strokes(tmp_path: Path) -> None:
-    """stroke.count 0 in ``run``: the actuator streams strokes until stopped, from the first sim time it
-    sees (logged); over 0.5 s the part moves as an offline burst starting then and cut at 0.5 s does."""
+    """stroke.count 0 in ``run``: the actuator streams strokes until stopped, from t = 0 (``run`` holds its
+    simulator there until the first window is in; they started stream.lead = 0.2 s late); over 0.5 s the part
+    moves as an offline burst cut at 0.5 s does."""
     run = subprocess.run([*CLI, 'run', '--duration', '0.5', '--set', 'stroke.count=0'], capture_output=True,
                          text=True, timeout=120)
     assert run.returncode == 0, run.stderr
@@ -57,6 +58,7 @@ def test_continuous_strokes_in_run_are_the_offline_strokes(tmp_path: Path) -> No
     moved = re.search(r'moved ([-+0-9.]+) um', run.stdout)
     transitions = re.search(r'transitions\s+(.*)', run.stdout)
     assert start and moved and transitions, run.stdout + run.stderr
+    assert float(start.group(1)) == 0.0, run.stderr
     assert '0 rejected, 0 late' in run.stdout, run.stdout + run.stderr
     offline = subprocess.run([*CLI, 'simulate', '--json', '--out', str(tmp_path), '--set', 'stroke.count=1000',
                               '--set', f'stroke.delay={start.group(1)}', '--duration', '0.5'],

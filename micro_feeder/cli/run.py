@@ -72,9 +72,10 @@ def summary(sim: Any, actuator: Any, wall_s: float, log: str | None, fate: str =
     return '\n'.join(lines)
 
 
-def _wait_until_ready(session: Any, sim: Any, actuator: Any, whole_burst: bool) -> None:
+def _wait_until_ready(session: Any, sim: Any, actuator: Any) -> None:
     """Spin (sim time held at 0) until the simulator hears the actuator, the recorder (if any) hears every
-    simulator topic and the actuator's command, and a whole burst has reached the simulator; at most
+    simulator topic and the actuator's command, and the burst (or a streamed burst's first window, which
+    starts at the held time: strokes from t = 0 as offline) has reached the simulator; at most
     :data:`READY_TIMEOUT` s of wall time, then start anyway and say what is missing. The actuator (built
     without ``auto_start``) sends its burst here, once every subscriber is matched: its own auto-start sends
     it when the simulator alone is, and it polled only every 50 ms."""
@@ -93,7 +94,7 @@ def _wait_until_ready(session: Any, sim: Any, actuator: Any, whole_burst: bool) 
 
     def missing() -> list[str]:
         out = listening()
-        if whole_burst and sim.commands.received < 1:
+        if sim.commands.received < 1:
             out.append('the actuator\'s burst at the simulator')
         return out
 
@@ -104,7 +105,7 @@ def _wait_until_ready(session: Any, sim: Any, actuator: Any, whole_burst: bool) 
     def start() -> None:
         if not started:
             started.append(True)
-            actuator.get_logger().info(actuator.start())
+            actuator.get_logger().info(actuator.start(held_at=sim.stepper.t))
 
     # checked by a timer that ends the spin at once (the spin's own checks come every 0.1 s: that held the run
     # at t = 0, and its log after the first pose, up to 100 ms longer than needed)
@@ -145,7 +146,7 @@ def run(args: argparse.Namespace) -> int:
         end = sim.stop_at(args.duration) if args.duration is not None else None   # before the actuator is built
         actuator = session.add(lambda: Actuator(context=session.context, namespace=ns,
                                                 overrides={**flat, 'auto_start': False}))   # started when ready
-        _wait_until_ready(session, sim, actuator, whole_burst=actuator.sends_whole_burst())
+        _wait_until_ready(session, sim, actuator)
         sim.resume()
         tty: TextIO | None = sys.stderr if sys.stderr.isatty() else None
         if tty is not None:

@@ -122,10 +122,12 @@ class Actuator(Node):
         count = flat['stroke.count']
         return StrokeParams.from_flat({**flat, 'stroke.count': max(count, 1)}), count
 
-    def start(self) -> str:
+    def start(self, held_at: float | None = None) -> str:
         """Send the burst: whole when it is finite and fits in ``stream.max_points`` knots, else start
         streaming it; with ``command_interface`` action, as one FollowJointTrajectory goal. Returns a one-line
-        description; raises ValueError (nothing sent) for a streamed burst with the action."""
+        description; raises ValueError (nothing sent) for a streamed burst with the action. A stream starts
+        ``stream.lead`` after the sim time it sees first, or at ``held_at`` (s) when the caller holds the
+        simulator there until the first window has reached it (``micro-feeder run``)."""
         knots = self._whole_burst_knots()
         if self.goals is not None:
             return self._send_goal(knots)
@@ -141,6 +143,9 @@ class Actuator(Node):
                 return sent
             return (f'{sent}; but no simulator is reached on actuator/trajectory yet (discovery), so only other '
                     f'subscribers get it: wait for simulator_reached on /diagnostics and start again')
+        if held_at is not None:
+            self._start_stream(held_at, lead=0.0)
+            return f'burst streamed from t = {self._stream.origin_ns * 1e-9:.9f} s (sim time)'
         self._pending_stream = True
         if self.sim_time is None:
             return 'burst streamed from the first sim time seen on actuator/joint_states'
@@ -172,10 +177,6 @@ class Actuator(Node):
         n = len(params.phases)
         knots = sample_waveform(params, n, self.get_parameter('knots_per_stroke').value)
         return knots if knots[0].size <= points_per_message(self.get_parameter('stream.max_points').value, n) else None
-
-    def sends_whole_burst(self) -> bool:
-        """Whether :meth:`start` sends the configured burst as one message (else it streams it)."""
-        return self._whole_burst_knots() is not None
 
     def _command_id(self, window: int | None = None) -> str:
         """The identity of a command this node sends (its trajectory's header.frame_id): node, process start,
@@ -251,10 +252,11 @@ class Actuator(Node):
                             max_points=self.get_parameter('stream.max_points').value,
                             knots_per_stroke=self.get_parameter('knots_per_stroke').value)
 
-    def _start_stream(self, now: float) -> None:
+    def _start_stream(self, now: float, lead: float | None = None) -> None:
+        """Stream the burst from sim time ``now`` + ``lead`` (s; default ``stream.lead``)."""
         self._pending_stream = False
         self._simulators = self._simulator_subscriptions() or frozenset()
-        self._stream = self._new_stream(now + self.get_parameter('stream.lead').value)
+        self._stream = self._new_stream(now + (self.get_parameter('stream.lead').value if lead is None else lead))
         self._feed(now)
 
     def _feed(self, now: float) -> None:
