@@ -55,7 +55,6 @@ class PartState:
     real_time_factor: float | None = None   # sim time over log time, from the first pose after the held start
 
 
-
 @dataclass
 class SimulatorRun:
     """How the simulator ran, from its recorded parameters and command receipts (None/0 when absent)."""

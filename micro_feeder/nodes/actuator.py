@@ -145,11 +145,11 @@ class Actuator(Node):
                     f'subscribers get it: wait for simulator_reached on /diagnostics and start again')
         if held_at is not None:
             self._start_stream(held_at, lead=0.0)
-            return f'burst streamed from t = {self._stream.origin_ns * 1e-9:.9f} s (sim time)'
-        self._pending_stream = True
-        if self.sim_time is None:
+        elif self.sim_time is None:
+            self._pending_stream = True
             return 'burst streamed from the first sim time seen on actuator/joint_states'
-        self._start_stream(self.sim_time)
+        else:
+            self._start_stream(self.sim_time)
         return f'burst streamed from t = {self._stream.origin_ns * 1e-9:.9f} s (sim time)'
 
     def _send_goal(self, knots: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray] | None) -> str:

@@ -198,7 +198,7 @@ class Recorder(Node):
         self._loss_counts[topic] = LossCount(subscription)
         self._topic_subscriptions[topic] = (subscription, type_name)
 
-    def record_in_process(self, node: Node) -> list[str]:
+    def record_in_process(self, node: Node) -> None:
         """Record ``node``'s publishers of :data:`IN_PROCESS_TOPICS` (a simulator in this process, built after
         the recorder and before it publishes them) where they publish, instead of through this recorder's
         subscriptions, which are destroyed."""
