@@ -211,8 +211,10 @@ def channel_value(src: tuple, k: int, j: int, i: int, t: float) -> tuple[float, 
     sddd = 6.0 * c[3] + tau * (24.0 * c[4] + tau * 60.0 * c[5])
     for h in range(N_TRIG):
         base = N_POLY + 3 * h
+        w = c[base + 2]
+        if w == 0.0:                    # the terms in use come first: the rest of the slots are empty
+            break
         if c[base] != 0.0 or c[base + 1] != 0.0:
-            w = c[base + 2]
             cw = math.cos(w * tau)
             sw = math.sin(w * tau)
             trig = c[base] * cw + c[base + 1] * sw
@@ -340,10 +342,16 @@ def sixth_derivative_bound(src: tuple, times: np.ndarray, out: np.ndarray) -> No
 
 def _segment(poly: Sequence[float] = (), cos: float = 0.0, sin: float = 0.0, omega: float = 0.0,
              more: Sequence[tuple[float, float, float]] = ()) -> np.ndarray:
-    """One coefficient row: the polynomial, the trigonometric term (cos, sin, omega), then ``more`` terms."""
+    """One coefficient row: the polynomial, the trigonometric term (cos, sin, omega), then ``more`` terms.
+
+    The terms in use fill the first slots and each runs at a frequency above 0: :func:`channel_value` stops at
+    the first slot whose omega is 0."""
+    terms = [(cos, sin, omega), *more]
+    if any(term[2] == 0.0 and any(later[2] != 0.0 for later in terms[h + 1:]) for h, term in enumerate(terms)):
+        raise ValueError(f'a trigonometric term at frequency 0 before one in use: {terms}')
     row = np.zeros(N_COEF)
     row[:len(poly)] = poly
-    for h, term in enumerate([(cos, sin, omega), *more]):
+    for h, term in enumerate(terms):
         row[N_POLY + 3 * h:N_POLY + 3 * h + 3] = term
     return row
 
