@@ -66,8 +66,11 @@ def test_sigusr1_prints_every_threads_stack_and_the_node_runs_on(ros_context: Co
     proc = _start('recorder', tmp_path, namespace)
     graph = Node('graph', context=ros_context)
     try:
-        wait_until(lambda: ('recorder', namespace) in graph.get_node_names_and_namespaces(), 120,
-                   what=f'{namespace}/recorder in the graph')
+        # its ~/stop service, made last in its constructor, after the writer thread: a node is in the graph
+        # from the start of its constructor, and a signal then found one thread (CI, 3 runs on 2 cores)
+        stop_service = f'{namespace}/recorder/stop'
+        wait_until(lambda: any(name == stop_service for name, _ in graph.get_service_names_and_types()), 120,
+                   what=f'{stop_service} in the graph')
         proc.send_signal(signal.SIGUSR1)
         time.sleep(1.0)
         assert proc.poll() is None
