@@ -81,6 +81,18 @@ def _interrupted_while_starting(_signum: int, _frame: object) -> None:
     os._exit(INTERRUPTED)
 
 
+_sigint_seen = False
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    """Python's own Ctrl-C (KeyboardInterrupt), remembered: raised while a C extension initialises (rclpy's,
+    imported by the command under load), it comes out as that module's ImportError ('initialization failed'),
+    which is then an interruption too, not a traceback."""
+    global _sigint_seen
+    _sigint_seen = True
+    signal.default_int_handler(signum, frame)
+
+
 def _run(argv: list[str] | None, quick_exit: bool = False) -> int:
     command = 'micro-feeder'
     try:
@@ -91,12 +103,15 @@ def _run(argv: list[str] | None, quick_exit: bool = False) -> int:
         args = parser.parse_args(argv)
         command = f'micro-feeder {args.command}'
         if quick_exit:  # from here on, Ctrl-C is the command's to handle (KeyboardInterrupt or its own)
-            signal.signal(signal.SIGINT, signal.default_int_handler)
+            signal.signal(signal.SIGINT, _interrupt)
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
         print(f'{command}: interrupted', file=sys.stderr)
         return INTERRUPTED
     except Exception as err:  # user mistakes are classified here, once, for every command
+        if _sigint_seen:    # Ctrl-C inside an extension module's import surfaces as its ImportError
+            print(f'{command}: interrupted', file=sys.stderr)
+            return INTERRUPTED
         reason = user_error(err)
         if reason is None:
             raise
