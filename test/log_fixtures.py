@@ -118,12 +118,13 @@ def rewrite_with_rosbags(source: Path, target: Path) -> None:
 
 
 def write_run_log(path: Path, *, first: int = 0, n: int = 100, trajectories: int = 0, receipts: int = 0,
-                  diag_commands: int | None = None, lost: int = 0) -> None:
+                  diag_commands: int | None = None, lost: int = 0, refused: int = 0) -> None:
     """A log as the recorder writes it of a simulator run at 1 kHz: poses from sim time ``first`` ms (a
     recorder that joined late starts later than 0), the last ``trajectories`` of the commands on
     ``actuator/trajectory``, ``receipts`` of them acknowledged on ``simulator/command_receipts``, the
     simulator's ``commands_received`` on ``/diagnostics`` (``diag_commands``; none when None), and the
-    recorder's counters (``lost`` messages of actuator/trajectory lost while recording)."""
+    recorder's counters (``lost`` messages of actuator/trajectory lost while recording); ``refused`` poses the
+    middleware refused to take from the simulator (its /diagnostics, with ``diag_commands``)."""
     from std_msgs.msg import Header
 
     writer = LogWriter(path)
@@ -143,7 +144,9 @@ def write_run_log(path: Path, *, first: int = 0, n: int = 100, trajectories: int
         writer.write('/simulator/command_receipts', serialize_message(receipt), T0 + k * 10_000_000 + 2)
     if diag_commands is not None:
         diag = DiagnosticArray(status=[DiagnosticStatus(name='simulator: loop', values=[
-            KeyValue(key='commands_received', value=str(diag_commands))])])
+            KeyValue(key='commands_received', value=str(diag_commands)),
+            KeyValue(key='publishes_refused', value=str(refused)),
+            *([KeyValue(key='publishes_refused./particle/pose', value=str(refused))] if refused else [])])])
         writer.add_topic('/diagnostics', type_name(diag))
         writer.write('/diagnostics', serialize_message(diag), t + 3)
     received = n + trajectories + receipts + (diag_commands is not None)

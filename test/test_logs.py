@@ -242,6 +242,17 @@ def test_info_reports_missing_first_commands(tmp_path):
     assert loss[0].startswith('loss       2 messages lost') and not any('start missing' in x for x in loss), loss
 
 
+def test_info_counts_the_messages_the_middleware_refused_to_take_from_the_simulator_as_lost(tmp_path):
+    """A message the middleware refused never reached a subscriber: the recorder cannot count it, the
+    simulator's /diagnostics do, and ``info`` must not say 'loss none' for it."""
+    write_run_log(tmp_path / 'log', trajectories=2, receipts=2, diag_commands=2, refused=3)
+    loss = _loss(tmp_path / 'log')
+    assert loss[0].startswith('loss       3 messages lost  (') and 'counted lost by the middleware 0' in loss[0]
+    assert loss[1:] == ["           refused by the middleware: 3 of the simulator's messages (no subscriber got "
+                        'them; its /diagnostics):',
+                        '             /particle/pose: 3'], loss
+
+
 def test_info_cli_prints_the_missing_start(tmp_path, capsys):
     from micro_feeder.cli import main
 

@@ -120,6 +120,11 @@ def test_loop_status_levels_and_values() -> None:
     assert wedged.level == ERROR and 'one tick has been working for 3.0 s' in wedged.message
     assert loop_status(_snapshot(error='SimulationError: x')).message == 'SimulationError: x'
     assert loop_status(_snapshot(periods_ms=np.zeros(0))).values['tick_period_p99_ms'] == 'nan'
+    assert ok.values['publishes_refused'] == '0'
+    refused = loop_status(_snapshot(refused={'/particle/pose': 4, '/clock': 1}, refused_new=2))
+    assert refused.level == WARN and 'refused 2 message(s)' in refused.message
+    assert refused.values['publishes_refused'] == '5' and refused.values['publishes_refused./clock'] == '1'
+    assert loop_status(_snapshot(refused={'/clock': 1})).level == OK      # counted, nothing new to warn of
 
 
 def test_the_handoff_runs_calls_in_order_on_its_thread_and_flush_waits_for_them() -> None:

@@ -99,6 +99,7 @@ class LogSummary:
     start: MissingStart = field(default_factory=MissingStart)
     parts: list[PartState] = field(default_factory=list)    # every part (particles/*), with several
     entity_changes: dict[str, int] = field(default_factory=dict)    # parts 'spawned' / 'deleted' during the run
+    publishes_refused: dict[str, int] = field(default_factory=dict)  # the simulator's messages nobody got, per topic
 
     @property
     def message_count(self) -> int:
@@ -147,30 +148,48 @@ def tick_length(params: dict | None) -> float:
     return float(params.get('step_period', DEFAULT_TICK))
 
 
-def _commands_received(log: LogReader) -> int:
-    """Commands the simulator says it received: its receipts in the log, or the ``commands_received`` of
-    its last ``/diagnostics`` when that is more (a counter since its start); 0 with neither."""
-    receipts = log.resolve('simulator/command_receipts')
-    received = log.topics[receipts].count if receipts else 0
-    counts: dict[str, int] = {}
+def simulator_statuses(log: LogReader) -> dict[str, dict[str, str]]:
+    """The key/values of each simulator's last ``/diagnostics`` status in the log, by status name."""
+    last: dict[str, dict[str, str]] = {}
     for m in log.messages(['/diagnostics'], decoded=True):
         for status in m.message.status:
             if status.name.endswith(SIMULATOR_STATUS_SUFFIX):
-                value = next((kv.value for kv in status.values if kv.key == 'commands_received'), None)
-                if value is not None and value.isdigit():
-                    counts[status.name] = int(value)
+                last[status.name] = {kv.key: kv.value for kv in status.values}
+    return last
+
+
+def _commands_received(log: LogReader, statuses: dict[str, dict[str, str]]) -> int:
+    """Commands the simulator says it received: its receipts in the log, or the ``commands_received`` of
+    its last ``/diagnostics`` (``statuses``) when that is more (a counter since its start); 0 with neither."""
+    receipts = log.resolve('simulator/command_receipts')
+    received = log.topics[receipts].count if receipts else 0
+    counts = [int(v) for values in statuses.values() if (v := values.get('commands_received', '')).isdigit()]
     if len(counts) == 1:        # several simulators on one log: their counters cannot be told apart here
-        received = max(received, *counts.values())
+        received = max(received, *counts)
     return received
 
 
-def missing_start(log: LogReader, part: PartState, recorder: dict[str, str]) -> MissingStart:
-    """What the log lacks from before the recorder subscribed (:class:`MissingStart`)."""
+def publishes_refused(statuses: dict[str, dict[str, str]]) -> dict[str, int]:
+    """Messages the middleware refused to take from the simulators (no subscriber, the recorder included, got
+    them), per topic, as their last ``/diagnostics`` (``statuses``) count them."""
+    refused: dict[str, int] = {}
+    for values in statuses.values():
+        for key, value in values.items():
+            if key.startswith('publishes_refused.') and value.isdigit():
+                topic = key.split('.', 1)[1]
+                refused[topic] = refused.get(topic, 0) + int(value)
+    return refused
+
+
+def missing_start(log: LogReader, part: PartState, recorder: dict[str, str],
+                  statuses: dict[str, dict[str, str]]) -> MissingStart:
+    """What the log lacks from before the recorder subscribed (:class:`MissingStart`); ``statuses``: the
+    simulators' last ``/diagnostics`` (:func:`simulator_statuses`)."""
     snapshots = recorded_parameters(log)
     start = MissingStart(tick=tick_length(snapshots[0] if snapshots else None))
     if part.first_stamp is not None and part.first_stamp > start.tick + 1e-9:
         start.first_pose = part.first_stamp
-    start.commands_received = _commands_received(log)
+    start.commands_received = _commands_received(log, statuses)
     held = lost = 0
     for topic in filter(None, map(log.command_source, COMMAND_TOPICS)):
         held += log.topics[topic].count
@@ -201,9 +220,10 @@ def summarize(log: LogReader) -> LogSummary:
         part.first_x = None
         for q in parts:
             q.first_x = None
+    statuses = simulator_statuses(log)
     return LogSummary(log.path, log.files, sum(f.stat().st_size for f in log.files), log.truncated,
                       log.start_ns, log.duration, rows, part, simulator_run(log), counters, source,
-                      missing_start(log, part, counters), parts, changes)
+                      missing_start(log, part, counters, statuses), parts, changes, publishes_refused(statuses))
 
 
 def _pace(log: LogReader, first: LogMessage, last: LogMessage) -> float | None:
@@ -262,12 +282,15 @@ def _loss_lines(s: LogSummary, coverage: Coverage | None = None) -> list[str]:
     log that ends early says its counts stop there."""
     ends_early = coverage is not None and coverage.end.kind != 'complete'
     if not s.recorder:
-        return ['loss       unknown (no recorder counters in this log)', *_start_lines(s.start, coverage)]
+        return ['loss       unknown (no recorder counters in this log)', *_refused_lines(s.publishes_refused),
+                *_start_lines(s.start, coverage)]
     c = s.recorder
     lost, incompatible = int(c.get('lost_total', 0)), int(c.get('incompatible_qos_total', 0))
     where = 'final summary' if s.recorder_source == 'summary' else 'last recorder diagnostics'
     missing = s.start or (coverage is not None and coverage.commands) or ends_early
-    verdict = f'{lost} messages lost' if lost or incompatible else 'none while recording' if missing else 'none'
+    refused = sum(s.publishes_refused.values())
+    verdict = (f'{lost + refused} messages lost' if lost or refused or incompatible
+               else 'none while recording' if missing else 'none')
     lines = [f'loss       {verdict}  (received {int(c.get("received_total", 0)):,}; counted lost by the '
              f'middleware {lost}, incompatible-QoS events {incompatible}; from the {where})']
     per_topic = {k.split('.', 1)[1]: v for k, v in c.items() if k.startswith('lost.') and v != '0'}
@@ -276,9 +299,20 @@ def _loss_lines(s: LogSummary, coverage: Coverage | None = None) -> list[str]:
         lines += textwrap.wrap('recorded as published, in the simulator\'s process (not through the middleware): '
                                + ', '.join(c['recorded_in_process'].split(',')), width=110,
                                initial_indent=' ' * 11, subsequent_indent=' ' * 13, break_on_hyphens=False)
+    lines += _refused_lines(s.publishes_refused)
     if ends_early:
         lines.append('           counted only up to where the log ends (ends, above): nothing after that is counted')
     return lines + _start_lines(s.start, coverage)
+
+
+def _refused_lines(refused: dict[str, int]) -> list[str]:
+    """What the simulator published and the middleware refused to take: in no subscriber's hands, so in no
+    recorder's counters."""
+    if not refused:
+        return []
+    return [f'           refused by the middleware: {sum(refused.values())} of the simulator\'s messages (no '
+            'subscriber got them; its /diagnostics):',
+            *(f'             {topic}: {n}' for topic, n in sorted(refused.items()))]
 
 
 def _start_lines(start: MissingStart, coverage: Coverage | None = None) -> list[str]:

@@ -45,6 +45,7 @@ from ..logs.reader import LogMessage, LogReader
 from ..progress import Progress
 from ._ros import StopFlag, message_class, qos_from_dict, spin_until
 from .fastdds_shm import remove_stale_files
+from .refused import RefusedPublishes
 
 DEFAULT_QOS = QoSProfile(depth=100)
 # rosbag2's /clock publisher (rclcpp::ClockQoS): best effort, volatile, keep last 1.
@@ -158,6 +159,7 @@ class Replay(Node):
         if p['publish_clock']:
             self._clock_pub = self.create_publisher(Clock, '/clock', CLOCK_QOS)
             self.create_timer(1.0 / p['clock_frequency'], self._publish_clock)
+        self.refused = RefusedPublishes(self.get_logger())
         self._thread = threading.Thread(target=self._play, name='replay-player', daemon=True)
 
     def _recorded(self, name: str, what: str) -> str:
@@ -248,7 +250,8 @@ class Replay(Node):
                 output = self._outputs.get(m.topic)
                 if output is None:       # the recorded /clock, read for the sim time only
                     continue
-                output.publish(m.data)
+                if not self.refused.publish(output, m.data):
+                    continue
                 error = time.monotonic() - due - self._pause_shift
                 self.timing_errors.append(error)
                 self.timing_count += 1
@@ -348,6 +351,9 @@ def main(args: list[str] | None = None, tap: Callable[[Node], None] | None = Non
         progress.close()
         node.close()
         print(f'replay: {node.timing_report()}')
+        if node.refused.total:
+            print(f'replay: the middleware refused {node.refused.total} messages (no subscriber got them): '
+                  + ', '.join(f'{topic} {n}' for topic, n in sorted(node.refused.counts.items())), file=sys.stderr)
         executor.shutdown()
         node.destroy_node()
         rclpy.shutdown()

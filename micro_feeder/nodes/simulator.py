@@ -23,6 +23,7 @@ action in :mod:`.trajectory_action`; both call this node's :meth:`~Simulator.res
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 import threading
 import time
@@ -95,6 +96,7 @@ class Simulator(Node):
         self._twin_guard.refuse_twin(created)
         self._outputs = SimulatorOutputs(self, self.stepper, publish_clock=p['publish_clock'],
                                          markers_period=1.0 / p['markers_rate'])
+        self._refused_reported = 0      # publishes the middleware refused, as of the last /diagnostics
         self._engine = Engine(self._session, self._outputs, self.get_logger(), lock=self._lock,
                               lockstep=p['lockstep'], rtf=p['real_time_factor'], step_period=p['step_period'],
                               period=1.0 / p['publish_rate'], start_paused=p['start_paused'],
@@ -307,14 +309,18 @@ class Simulator(Node):
 
     def _publish_parameters(self) -> None:
         """The parameters in force on the latched ``~/parameters`` (:meth:`SimulatorParameters.event`)."""
-        self._outputs.parameters.publish(self._params.event(self.stepper.t, self.started_at_ns))
+        self._outputs.refused.publish(self._outputs.parameters,
+                                      self._params.event(self.stepper.t, self.started_at_ns))
 
     def diagnostics(self) -> DiagnosticStatus:
         """The simulator's status (:func:`loop_status` of :meth:`Engine.snapshot`): achieved real-time factor
         over the time since the last call, tick timing, counters. Takes no lock, so it reports even while a
         tick is stuck."""
-        status = loop_status(self._engine.snapshot(pending_reset=self._params.pending,
-                                                   other_simulators=len(self.twins)))
+        refused = self._outputs.refused
+        snapshot = self._engine.snapshot(pending_reset=self._params.pending, other_simulators=len(self.twins))
+        status = loop_status(dataclasses.replace(snapshot, refused=dict(refused.counts),
+                                                 refused_new=refused.total - self._refused_reported))
+        self._refused_reported = refused.total
         if status.level != 0:
             self.get_logger().warning(status.message, throttle_duration_sec=10.0)
         return DiagnosticStatus(name=status_name(self, 'loop'), hardware_id='micro_feeder',
@@ -323,8 +329,8 @@ class Simulator(Node):
 
     def _publish_diagnostics(self) -> None:
         self._session.flush_logs()
-        self._outputs.diagnostics.publish(DiagnosticArray(header=Header(stamp=stamps.to_time(self.stepper.t)),
-                                                          status=[self.diagnostics()]))
+        report = DiagnosticArray(header=Header(stamp=stamps.to_time(self.stepper.t)), status=[self.diagnostics()])
+        self._outputs.refused.publish(self._outputs.diagnostics, report)
 
 
 def _decode_setpoints(data: bytes) -> Sequence[float]:

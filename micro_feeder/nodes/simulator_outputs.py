@@ -6,7 +6,8 @@ commands received).
 joint per actuator, per-part messages, surface markers) that :meth:`~SimulatorOutputs.configure` rebuilds
 for each model. It is the engine's :class:`~micro_feeder.sim.engine.Outputs`, called with the engine's lock
 held, between two ticks (a batch's receipts just after it); the node publishes ``~/parameters`` and
-``/diagnostics`` on :attr:`~SimulatorOutputs.parameters` and :attr:`~SimulatorOutputs.diagnostics`.
+``/diagnostics`` on :attr:`~SimulatorOutputs.parameters` and :attr:`~SimulatorOutputs.diagnostics`. A message
+the middleware refuses is counted in :attr:`~SimulatorOutputs.refused` (:mod:`.refused`), and publishing goes on.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from ..physics.dynamics.model import ObservedParts
 from ..realtime.intake import Received
 from ..sim.stepper import Stepper
 from ._ros import status_name, topic_qos
+from .refused import RefusedPublishes
 
 PART_SIZE = 100e-6     # marker diameter of the part (m)
 MARKER_POINTS = 200    # points of the surface line strip
@@ -70,6 +72,8 @@ class SimulatorOutputs:
         self._pub_entity_changes = publisher(DiagnosticArray, ENTITY_CHANGES, '~/entity_changes')
         self._pub_received = {topic: publisher(COMMAND_TYPES[topic], copy, '~/' + copy.split('/')[-1])
                               for topic, copy in RECEIVED_COPIES.items()}
+        self.refused = RefusedPublishes(node.get_logger())
+        self._send = self.refused.publish
         self._markers_period = markers_period
         self._last_markers = -float('inf')
         self._transitions = TransitionEncoder(status_name(node, 'transition').removesuffix(': transition'))
@@ -97,57 +101,57 @@ class SimulatorOutputs:
         obs = observed[0]
         parts = self._parts_messages
         parts.update(observed)
-        self._pub_part_poses.publish(parts.poses)
-        self._pub_part_states.publish(parts.states)
+        self._send(self._pub_part_poses, parts.poses)
+        self._send(self._pub_part_states, parts.states)
         transitions = [(event, part) for part, part_events in enumerate(events) if len(part_events)
                        for event in part_events if event.kind != 'reversal']
         if transitions:
             transitions.sort(key=lambda item: item[0].t)
-            self._pub_part_transitions.publish(self._transitions.encode_parts(transitions))
+            self._send(self._pub_part_transitions, self._transitions.encode_parts(transitions))
         events = events[0] if events else []
         state = self._state_messages
         stamp = state.update(obs, obs.stroke_velocities)
-        self._pub_pose.publish(state.pose)
-        self._pub_twist.publish(state.twist)
-        self._pub_wrench.publish(state.wrench)
-        self._pub_joints.publish(state.joints)
+        self._send(self._pub_pose, state.pose)
+        self._send(self._pub_twist, state.twist)
+        self._send(self._pub_wrench, state.wrench)
+        self._send(self._pub_joints, state.joints)
         for event in events:
             if event.kind != 'reversal':
-                self._pub_transitions.publish(self._transitions.encode(event))
+                self._send(self._pub_transitions, self._transitions.encode(event))
                 self._publish_mode(event.to_mode)
         self._publish_mode(obs.mode)
         if self._pub_clock is not None:
-            self._pub_clock.publish(state.clock)
+            self._send(self._pub_clock, state.clock)
         now = time.perf_counter()
         if now - self._last_markers >= self._markers_period:
             self._last_markers = now
-            self._pub_markers.publish(self._markers.update(obs, stamp))
+            self._send(self._pub_markers, self._markers.update(obs, stamp))
 
     def _publish_mode(self, mode: str) -> None:
         if mode != self._mode:
             self._mode = mode
-            self._pub_mode.publish(messages.contact_state_bytes(mode))
+            self._send(self._pub_mode, messages.contact_state_bytes(mode))
 
     def parts_changed(self, n_parts: int, change: EntityChange) -> None:
         """A part spawned or deleted: buffers for ``n_parts`` parts, and the change on ``~/entity_changes``."""
         self._parts_messages = PartsMessages(n_parts)
-        self._pub_entity_changes.publish(change.message(self._entity_status_name))
+        self._send(self._pub_entity_changes, change.message(self._entity_status_name))
 
     def copy_received(self, topic: str, message: Any) -> None:
         """A command received on ``topic`` (serialized, or a goal's trajectory) on its copy
         (``simulator/trajectories_received``): what a recorder holds whichever senders it discovered."""
         if topic in self._pub_received:
-            self._pub_received[topic].publish(message)
+            self._send(self._pub_received[topic], message)
 
     def acknowledge(self, received: Received, t: float) -> None:
         """``~/command_receipts``: a command arrived on its topic (with its identity, if it has one) and was
         handled at sim time ``t`` (s)."""
-        self._pub_receipts.publish(messages.header_bytes(t, receipt_frame(received.topic, received.command_id)))
+        self._send(self._pub_receipts, messages.header_bytes(t, receipt_frame(received.topic, received.command_id)))
 
     def answer(self, received: Received, t: float, refusal: str) -> None:
         """``~/command_status``: why the command received at sim time ``t`` (s) was not applied (refusals only)."""
         if refusal:     # published as bytes: a flood of refusals is answered one by one
-            self._pub_status.publish(messages.command_status(
+            self._send(self._pub_status, messages.command_status(
                 t, receipt_frame(received.topic, received.command_id), self._command_status_name,
                 received.topic, received.command_id, refusal))
 

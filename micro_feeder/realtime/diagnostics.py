@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -38,6 +38,8 @@ class LoopSnapshot:
     other_simulators: int = 0     # other live simulators of this one's name seen since start
     command_age: float = math.nan  # wall s since the last command arrived (nan: none yet)
     stream_silent: float = 0.0    # sim s since a stream's strokes ran out with no command after them
+    refused: Mapping[str, int] = field(default_factory=dict)   # messages the middleware refused, per topic
+    refused_new: int = 0          # of them, since the last report
 
 
 @dataclass(frozen=True)
@@ -72,6 +74,10 @@ def loop_status(s: LoopSnapshot) -> LoopStatus:
     elif s.stream_silent > SILENT_STREAM_S:
         level, message = WARN, (f'command source silent: the streamed strokes ran out {s.stream_silent:.3f} s of '
                                 f'sim time ago (last command {s.command_age:.1f} s ago, wall); strokes held')
+    elif s.refused_new:
+        level, message = WARN, (f'the middleware refused {s.refused_new} message(s) since the last report, on '
+                                f'{", ".join(sorted(s.refused))}: no subscriber got them (a subscriber that '
+                                'stopped and resumed, or a machine out of CPU); the simulation goes on')
     elif lagging:
         level, message = WARN, (f'behind real time ({s.achieved_rtf:.3f} x): the ticks\' work (physics and '
                                 f'publishing, tick_compute_p99_ms {_pct(s.busy_ms, 99)}) or a busy CPU')
@@ -88,6 +94,8 @@ def loop_status(s: LoopSnapshot) -> LoopStatus:
               'stream_silent_s': f'{s.stream_silent:.3f}',
               'lockstep': str(s.lockstep), 'steps_granted': str(s.steps_granted),
               'states_published': str(s.states_published),
-              **s.intake, 'model_parameters_pending_reset': str(s.pending_reset)}
+              **s.intake, 'model_parameters_pending_reset': str(s.pending_reset),
+              'publishes_refused': str(sum(s.refused.values())),
+              **{f'publishes_refused.{topic}': str(n) for topic, n in sorted(s.refused.items())}}
     values.update({k: str(v) for k, v in s.transitions.items()})
     return LoopStatus(level, message, values)

@@ -1,0 +1,85 @@
+"""A message the middleware refuses to take (``RCLError: cannot publish data``) is counted and reported, and the
+simulator runs on. Before, a refusal ended the simulation for every subscriber.
+
+Fast DDS refuses a write when it cannot make room in a full writer history within ``max_blocking_time``. In a
+clean-clone CI run, a recorder that had been stopped (SIGSTOP) resumed and asked for repairs on a loaded machine,
+and its publisher was refused. That state cannot be brought about on demand. So :class:`RefusingPublisher`
+wraps a real publisher and refuses its first messages with the same error. Everything else here is the real
+node, middleware and subscriber.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+from geometry_msgs.msg import PoseStamped
+from rclpy._rclpy_pybind11 import RCLError
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from ros_helpers import wait_until
+
+from micro_feeder.nodes._ros import topic_qos
+from micro_feeder.nodes.simulator import Simulator
+from micro_feeder.realtime.diagnostics import WARN
+
+pytestmark = pytest.mark.faults
+
+REFUSED = 3
+
+
+class RefusingPublisher:
+    """A real publisher whose first ``refusals`` messages the middleware 'refuses', as Fast DDS does."""
+
+    def __init__(self, publisher: Any, refusals: int) -> None:
+        self._publisher = publisher
+        self.refusals = refusals
+
+    def publish(self, message: Any) -> None:
+        if self.refusals:
+            self.refusals -= 1
+            raise RCLError('Failed to publish: cannot publish data, at /project/src/rmw_publish.cpp:68')
+        self._publisher.publish(message)
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._publisher, name)
+
+
+def _values(status: Any) -> dict[str, str]:
+    return {kv.key: kv.value for kv in status.values}
+
+
+def test_a_refused_state_message_is_counted_and_the_simulator_runs_on(ros_context: Context) -> None:
+    sim = Simulator(context=ros_context, namespace='/refused', hold=True)
+    listener = Node('pose_listener', namespace='/refused', context=ros_context)
+    poses: list[float] = []
+    listener.create_subscription(PoseStamped, 'particle/pose',
+                                 lambda m: poses.append(m.header.stamp.sec + m.header.stamp.nanosec * 1e-9),
+                                 topic_qos('particle/pose'))
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(sim)
+    executor.add_node(listener)
+    try:
+        sim.diagnostics()                                   # the report window starts here
+        wait_until(lambda: sim._outputs._pub_pose.get_subscription_count() > 0, 30, executor=executor,
+                   what='the listener matched')
+        refusing = RefusingPublisher(sim._outputs._pub_pose, REFUSED)
+        sim._outputs._pub_pose = refusing
+        sim.resume()
+        wait_until(lambda: len(poses) >= 50, 30, executor=executor, what='poses after the refused ones')
+        assert refusing.refusals == 0 and not sim.error
+        first = sim.diagnostics()
+        again = sim.diagnostics()
+    finally:
+        executor.shutdown()
+        listener.destroy_node()
+        sim.destroy_node()
+    assert first.level == bytes([WARN]), first.message
+    assert f'refused {REFUSED} message(s)' in first.message and '/refused/particle/pose' in first.message
+    values = _values(first)
+    assert values['publishes_refused'] == str(REFUSED)
+    assert values['publishes_refused./refused/particle/pose'] == str(REFUSED)
+    assert 'refused' not in again.message                 # nothing new since: the count stays, the warning goes
+    assert _values(again)['publishes_refused'] == str(REFUSED)
+    assert poses == sorted(poses)                         # what did go out went out in order
