@@ -549,3 +549,23 @@ def test_stepped_node_and_its_resim_decide_the_bump_centre_take_off_at_the_close
     # a topic with no message is not in the log (the recorder adds a topic with its first message)
     assert report.recorded_transitions == (report.transitions if expected else None)
     assert report.identical, report.verdict()
+
+
+def test_the_simulator_says_when_its_command_subscription_hears_a_publisher(ros_context: Context) -> None:
+    """``hears``: the simulator's own end of ``actuator/trajectory`` has matched a publisher (what ``run``
+    waits for before its actuator sends: a publisher's count of matched subscriptions is the other end)."""
+    sim = Simulator(context=ros_context, namespace='/hears', overrides={'start_paused': True})
+    sender = rclpy.create_node('sender', namespace='/hears', context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(sim)
+    executor.add_node(sender)
+    try:
+        assert not sim.hears('actuator/trajectory')
+        sender.create_publisher(JointTrajectory, 'actuator/command_elsewhere', 10)
+        sender.create_publisher(JointTrajectory, 'actuator/trajectory', topic_qos('actuator/trajectory'))
+        wait_until(lambda: sim.hears('actuator/trajectory'), 30, executor=executor, what='the subscription matched')
+        assert not sim.hears('actuator/command')
+    finally:
+        executor.shutdown()
+        sender.destroy_node()
+        sim.destroy_node()

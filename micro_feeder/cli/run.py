@@ -78,7 +78,9 @@ def _wait_until_ready(session: Any, sim: Any, actuator: Any) -> None:
     starts at the held time: strokes from t = 0 as offline) has reached the simulator; at most
     :data:`READY_TIMEOUT` s of wall time, then start anyway and say what is missing. The actuator (built
     without ``auto_start``) sends its burst here, once every subscriber is matched: its own auto-start sends
-    it when the simulator alone is, and it polled only every 50 ms."""
+    it when the simulator alone is, and it polled only every 50 ms. Matched means on both ends: the actuator's
+    publisher counted the simulator's subscription before that subscription knew the publisher, and the
+    burst sent then was lost (the run waited 10 s and started without it, on a loaded machine)."""
     from rclpy.clock import Clock, ClockType
     from rclpy.task import Future
 
@@ -86,7 +88,7 @@ def _wait_until_ready(session: Any, sim: Any, actuator: Any) -> None:
 
     def listening() -> list[str]:
         out = []
-        if actuator.trajectory_subscribers() < 1 + recording:
+        if actuator.trajectory_subscribers() < 1 + recording or not sim.hears('actuator/trajectory'):
             out.append('the simulator' + (' and the recorder' if recording else '') + ' on actuator/trajectory')
         if not session.recorder_hears(sim):
             out.append('the recorder on the simulator\'s topics')

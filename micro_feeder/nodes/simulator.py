@@ -261,6 +261,13 @@ class Simulator(Node):
         """((3, joints) commanded s, ṡ, s̈ at ``t`` (s; default now), the state now); raises :class:`Busy`."""
         return self._engine.strokes(t)
 
+    def hears(self, topic: str) -> bool:
+        """True when this node's subscription to the command ``topic`` (``actuator/trajectory``) has matched a
+        publisher: what is sent now arrives. A publisher that matched it on its side only can send before the
+        subscription knows the publisher, and a volatile subscription never gets that message."""
+        name = self.resolve_topic_name(topic)
+        return any(sub.topic_name == name and sub.get_publisher_count() > 0 for sub in self.subscriptions)
+
     def outputs_matched(self, recorded_in_process: Collection[str] = ()) -> bool:
         """True when every state topic the simulator publishes has at least one subscription matched (a
         recorder that has not yet matched a topic would miss its first messages), not counting the topics
