@@ -39,7 +39,7 @@ from .layout import (
     TAKE_OFF,
     KernelModel,
 )
-from .rhs import contact_load, evaluate, felt_range, sign, strokes_at, surface_graph, surface_load
+from .rhs import contact_load, evaluate, felt_range, interp, sign, strokes_at, surface_graph, surface_load
 from .steppers import dopri5_dense, hermite, interpolant_reach
 
 JUMP_TOLERANCE = 1e-9    # relative (1 + |ẋ| in m/s): a stuck part's velocity and its material point's differ
@@ -140,7 +140,8 @@ def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0:
     NaN where :func:`margin_slopes` has no closed form), each with its own values and slopes at both ends
     (the margin is the lower of them, below 0 where either is). The other branch's search is skipped where
     T_req provably keeps its sign over the step (:func:`required_friction_keeps_sign`, asked only when that
-    branch's slopes call for a search): the margin is then one smooth branch.
+    branch's slopes call for a search): the margin is then one smooth branch. Nor is a branch searched whose
+    lower bound over the step is above 0 (:func:`stick_branch_floor`): no dip of it reaches its event.
     """
     tol = model.event_tolerance / h
     if tol >= 0.25:
@@ -170,6 +171,8 @@ def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0:
     s0 = 1.0 if t_req0 > 0.0 else -1.0       # the sign of T_req where the step starts, and where it ends
     s1 = 1.0 if t_req1 > 0.0 else -1.0
     best = 2.0
+    ranged = derived = False                # the stuck step's ranges (stuck_ranges), found when first needed
+    hx_lo = hx_hi = acc_lo = acc_hi = 0.0
     for which in range(2):
         start, end = (g0, e0) if which == 0 else (g1, e1)
         near_end, start_slope, end_slope = (b0, start_slope0, end_slope0) if which == 0 else \
@@ -192,8 +195,15 @@ def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0:
                 d_end = end_slope + (s1 - branch) * t_rate1
             if not (d_start < 0.0 and d_end > 0.0):
                 continue
-            if k == 1 and t_req0 * t_req1 >= 0.0 and required_friction_keeps_sign(t, h, y0, model, src, cur):
-                continue                        # no kink: the margin is the branch searched first
+            if strict:
+                if not ranged:
+                    derived, hx_lo, hx_hi, acc_lo, acc_hi = stuck_ranges(t, h, y0, model, src, cur)
+                    ranged = True
+                if derived and k == 1 and t_req0 * t_req1 >= 0.0 and one_sided(hx_lo, hx_hi) \
+                        and one_sided(acc_lo, acc_hi):
+                    continue                    # no kink: the margin is the branch searched first
+                if derived and stick_branch_floor(branch, hx_lo, hx_hi, acc_lo, acc_hi, model) > 0.0:
+                    continue                    # this branch stays above its event over the step
             if which == 1 and adhesion_floor(mode, t, h, y0, f0, y1, f1, work, dense, model, src, cur) > 0.0:
                 continue                        # the adhesion margin cannot reach 0 in this step
             seed = dip_seed(v_start, v_end, d_start * h, d_end * h, tol)
@@ -205,20 +215,15 @@ def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0:
 
 
 @jit_inline
-def required_friction_keeps_sign(t: float, h: float, y0: np.ndarray, model: KernelModel, src: tuple,
-                                 cur: np.ndarray) -> bool:
-    """True where T_req = N h_x provably never changes sign over the stuck step [t, t + h] of a part held
-    at rest at x = ``y0[0]`` on the bump surface (it may touch 0); False where that is not derived (the
-    piezo model, a base, a track, a thick surface). Then the stick margin Q_max − |T_req| is its smooth
-    branch Q_max − s T_req over the whole step (no kink to hide a dip, and a root search's root is its only
-    one) and the other branch, Q_max + |T_req| ≥ Q_max ≥ 0, needs no search.
-
-    At rest, N = m (h_tt + g) / L and h_x = Σ s_k g_k'(x): each keeps its sign where its range over the
-    step, from each felt actuator's range of s_k and s̈_k (:func:`channel_ranges`) times its bump g_k and
-    g_k' at x, lies on one side of 0 (:func:`one_sided`).
-    """
+def stuck_ranges(t: float, h: float, y0: np.ndarray, model: KernelModel, src: tuple,
+                 cur: np.ndarray) -> tuple[bool, float, float, float, float]:
+    """(derived, h_x's range, (h_tt + g)'s range) over the stuck step [t, t + h] of a part held at rest at
+    x = ``y0[0]`` on the bump surface: h_x = Σ s_k g_k'(x) and h_tt + g = g + Σ s̈_k g_k(x), from each felt
+    actuator's range of s_k and s̈_k (:func:`channel_ranges`) times its bump g_k and g_k' at x. Not derived
+    (False) for the piezo model, a base, a track, a thick surface or a part not at rest: there N and T_req
+    depend on more than these two."""
     if model.piezo or model.has_base or model.track or model.half_thickness > 0.0 or y0[1] != 0.0:
-        return False
+        return False, 0.0, 0.0, 0.0, 0.0
     x = y0[0]
     hx_lo = hx_hi = 0.0
     acc_lo = acc_hi = model.gravity
@@ -235,7 +240,52 @@ def required_friction_keeps_sign(t: float, h: float, y0: np.ndarray, model: Kern
         hx_hi += max(slope * s_lo, slope * s_hi)
         acc_lo += g * sdd_lo
         acc_hi += g * sdd_hi
-    return one_sided(hx_lo, hx_hi) and one_sided(acc_lo, acc_hi)
+    return True, hx_lo, hx_hi, acc_lo, acc_hi
+
+
+@jit_inline
+def required_friction_keeps_sign(t: float, h: float, y0: np.ndarray, model: KernelModel, src: tuple,
+                                 cur: np.ndarray) -> bool:
+    """True where T_req = N h_x provably never changes sign over the stuck step [t, t + h] of a part held
+    at rest at x = ``y0[0]`` on the bump surface (it may touch 0); False where that is not derived
+    (:func:`stuck_ranges`). Then the stick margin Q_max − |T_req| is its smooth branch Q_max − s T_req over
+    the whole step (no kink to hide a dip, and a root search's root is its only one) and the other branch,
+    Q_max + |T_req| ≥ Q_max ≥ 0, needs no search.
+
+    At rest, N = m (h_tt + g) / L: N and h_x each keep their sign where their ranges lie on one side of 0
+    (:func:`one_sided`).
+    """
+    derived, hx_lo, hx_hi, acc_lo, acc_hi = stuck_ranges(t, h, y0, model, src, cur)
+    return derived and one_sided(hx_lo, hx_hi) and one_sided(acc_lo, acc_hi)
+
+
+@jit_inline
+def stick_branch_floor(branch: float, hx_lo: float, hx_hi: float, acc_lo: float, acc_hi: float,
+                       model: KernelModel) -> float:
+    """A lower bound (N) of the stick margin's smooth branch Q_max(N) − ``branch``·T_req over a stuck step,
+    from the ranges of h_x and h_tt + g over it (:func:`stuck_ranges`). At rest N = m a / L and
+    T_req = N h_x = m a φ(h_x), with a = h_tt + g, L = √(1 + h_x²) and φ(u) = u / √(1 + u²) increasing:
+    each is bilinear in a and a monotone function of h_x, so its extremes are at the ranges' corners;
+    Q_max is the piecewise-linear table, whose minimum over N's range is at its ends or a knot inside.
+    Above 0, that branch cannot dip to its event in the step: its search is skipped."""
+    m = model.mass
+    phi_lo = hx_lo / math.sqrt(1.0 + hx_lo * hx_lo)
+    phi_hi = hx_hi / math.sqrt(1.0 + hx_hi * hx_hi)
+    t_lo = m * min(acc_lo * phi_lo, acc_lo * phi_hi, acc_hi * phi_lo, acc_hi * phi_hi)
+    t_hi = m * max(acc_lo * phi_lo, acc_lo * phi_hi, acc_hi * phi_lo, acc_hi * phi_hi)
+    steepest = max(hx_lo * hx_lo, hx_hi * hx_hi)
+    flattest = 0.0 if hx_lo <= 0.0 <= hx_hi else min(hx_lo * hx_lo, hx_hi * hx_hi)
+    inv_lo, inv_hi = 1.0 / math.sqrt(1.0 + steepest), 1.0 / math.sqrt(1.0 + flattest)
+    n_lo = m * min(acc_lo * inv_lo, acc_lo * inv_hi, acc_hi * inv_lo, acc_hi * inv_hi)
+    n_hi = m * max(acc_lo * inv_lo, acc_lo * inv_hi, acc_hi * inv_lo, acc_hi * inv_hi)
+    loads, limits = model.load_n, model.q_max_n
+    q_lo = min(interp(loads, limits, n_lo), interp(loads, limits, n_hi))
+    i = int(np.searchsorted(loads, n_lo, side='right'))
+    while i < loads.size and loads[i] < n_hi:
+        q_lo = min(q_lo, limits[i])
+        i += 1
+    demand = t_hi if branch > 0.0 else -t_lo
+    return q_lo - demand - 1e-9 * (abs(q_lo) + abs(demand))      # less a margin for the roundings
 
 
 @jit_inline
