@@ -13,7 +13,7 @@ from model_variants import MARGIN_MODELS
 from micro_feeder.physics.dynamics import FeederModel
 from micro_feeder.physics.dynamics import kernel as k
 from micro_feeder.physics.dynamics.events import required_friction_keeps_sign, stick_branch_floor, stuck_ranges
-from micro_feeder.physics.dynamics.layout import AUX_QMAX, AUX_T_REQ, N_AUX, STUCK
+from micro_feeder.physics.dynamics.layout import AUX_LOAD_INDEX, AUX_QMAX, AUX_T_REQ, N_AUX, STUCK
 from micro_feeder.physics.dynamics.rhs import evaluate
 from micro_feeder.physics.waveforms import WAVEFORMS, channel_ranges, channel_value
 
@@ -142,8 +142,13 @@ def test_the_stick_branch_floor_is_below_the_branch_everywhere_in_the_step(name:
             continue
         derived += 1
         for column, branch in enumerate((1.0, -1.0)):
-            floor = stick_branch_floor(branch, *ranges, model._kernel_model)
             lowest = values[:, column].min()
+            floors = set()
+            for hint in (0.0, 1e9):         # the table walk starts at either end (the last load's interval)
+                aux = np.zeros(N_AUX)
+                aux[AUX_LOAD_INDEX] = hint
+                floors.add(stick_branch_floor(branch, *ranges, model._kernel_model, aux))
+            floor, = floors
             assert floor <= lowest, (t, x, h, branch, floor, lowest)
             cleared += floor > 0.0
     if derived:

@@ -11,6 +11,7 @@ from .._jit import jit, jit_inline
 from ..waveforms import channel_bounds, channel_ranges
 from .layout import (
     AUX_L,
+    AUX_LOAD_INDEX,
     AUX_MAT_VX,
     AUX_MAT_VZ,
     AUX_N,
@@ -39,7 +40,7 @@ from .layout import (
     TAKE_OFF,
     KernelModel,
 )
-from .rhs import contact_load, evaluate, felt_range, interp, sign, strokes_at, surface_graph, surface_load
+from .rhs import contact_load, evaluate, felt_range, sign, strokes_at, surface_graph, surface_load, table_interval
 from .steppers import dopri5_dense, hermite, interpolant_reach
 
 JUMP_TOLERANCE = 1e-9    # relative (1 + |ẋ| in m/s): a stuck part's velocity and its material point's differ
@@ -202,7 +203,7 @@ def first_dip(mode: int, direction: int, t: float, h: float, y0: np.ndarray, f0:
                 if derived and k == 1 and t_req0 * t_req1 >= 0.0 and one_sided(hx_lo, hx_hi) \
                         and one_sided(acc_lo, acc_hi):
                     continue                    # no kink: the margin is the branch searched first
-                if derived and stick_branch_floor(branch, hx_lo, hx_hi, acc_lo, acc_hi, model) > 0.0:
+                if derived and stick_branch_floor(branch, hx_lo, hx_hi, acc_lo, acc_hi, model, aux) > 0.0:
                     continue                    # this branch stays above its event over the step
             if which == 1 and adhesion_floor(mode, t, h, y0, f0, y1, f1, work, dense, model, src, cur) > 0.0:
                 continue                        # the adhesion margin cannot reach 0 in this step
@@ -261,29 +262,31 @@ def required_friction_keeps_sign(t: float, h: float, y0: np.ndarray, model: Kern
 
 @jit_inline
 def stick_branch_floor(branch: float, hx_lo: float, hx_hi: float, acc_lo: float, acc_hi: float,
-                       model: KernelModel) -> float:
+                       model: KernelModel, aux: np.ndarray) -> float:
     """A lower bound (N) of the stick margin's smooth branch Q_max(N) − ``branch``·T_req over a stuck step,
     from the ranges of h_x and h_tt + g over it (:func:`stuck_ranges`). At rest N = m a / L and
     T_req = N h_x = m a φ(h_x), with a = h_tt + g, L = √(1 + h_x²) and φ(u) = u / √(1 + u²) increasing:
     each is bilinear in a and a monotone function of h_x, so its extremes are at the ranges' corners;
-    Q_max is the piecewise-linear table, whose minimum over N's range is at its ends or a knot inside.
+    Q_max is the piecewise-linear table, whose minimum over N's range is at its ends or a knot inside
+    (found from the table interval of the last load, ``aux[AUX_LOAD_INDEX]``, only read).
     Above 0, that branch cannot dip to its event in the step: its search is skipped."""
     m = model.mass
-    phi_lo = hx_lo / math.sqrt(1.0 + hx_lo * hx_lo)
-    phi_hi = hx_hi / math.sqrt(1.0 + hx_hi * hx_hi)
+    root_lo, root_hi = math.sqrt(1.0 + hx_lo * hx_lo), math.sqrt(1.0 + hx_hi * hx_hi)
+    phi_lo, phi_hi = hx_lo / root_lo, hx_hi / root_hi
     t_lo = m * min(acc_lo * phi_lo, acc_lo * phi_hi, acc_hi * phi_lo, acc_hi * phi_hi)
     t_hi = m * max(acc_lo * phi_lo, acc_lo * phi_hi, acc_hi * phi_lo, acc_hi * phi_hi)
-    steepest = max(hx_lo * hx_lo, hx_hi * hx_hi)
-    flattest = 0.0 if hx_lo <= 0.0 <= hx_hi else min(hx_lo * hx_lo, hx_hi * hx_hi)
-    inv_lo, inv_hi = 1.0 / math.sqrt(1.0 + steepest), 1.0 / math.sqrt(1.0 + flattest)
+    inv_lo = 1.0 / max(root_lo, root_hi)                           # 1/L over the step: L is largest at
+    inv_hi = 1.0 if hx_lo <= 0.0 <= hx_hi else 1.0 / min(root_lo, root_hi)   # the steepest h_x
     n_lo = m * min(acc_lo * inv_lo, acc_lo * inv_hi, acc_hi * inv_lo, acc_hi * inv_hi)
     n_hi = m * max(acc_lo * inv_lo, acc_lo * inv_hi, acc_hi * inv_lo, acc_hi * inv_hi)
     loads, limits = model.load_n, model.q_max_n
-    q_lo = min(interp(loads, limits, n_lo), interp(loads, limits, n_hi))
-    i = int(np.searchsorted(loads, n_lo, side='right'))
-    while i < loads.size and loads[i] < n_hi:
-        q_lo = min(q_lo, limits[i])
+    last = loads.size - 2
+    i = table_interval(loads, n_lo, aux[AUX_LOAD_INDEX])
+    q_lo = limits[i] + (n_lo - loads[i]) * (limits[i + 1] - limits[i]) / (loads[i + 1] - loads[i])
+    while i < last and n_hi >= loads[i + 1]:
         i += 1
+        q_lo = min(q_lo, limits[i])
+    q_lo = min(q_lo, limits[i] + (n_hi - loads[i]) * (limits[i + 1] - limits[i]) / (loads[i + 1] - loads[i]))
     demand = t_hi if branch > 0.0 else -t_lo
     return q_lo - demand - 1e-9 * (abs(q_lo) + abs(demand))      # less a margin for the roundings
 

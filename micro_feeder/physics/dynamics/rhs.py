@@ -48,15 +48,23 @@ def interp(xs: np.ndarray, ys: np.ndarray, x: float) -> float:
 
 
 @jit_inline
-def interp_near(xs: np.ndarray, ys: np.ndarray, x: float, aux: np.ndarray, slot: int) -> float:
-    """:func:`interp`, searching from the interval found last time (kept in ``aux[slot]``): the load
-    changes little between evaluations, so this walks 0-2 intervals instead of bisecting the table."""
+def table_interval(xs: np.ndarray, x: float, start: float) -> int:
+    """The interval i of a table with increasing ``xs`` that holds ``x`` (xs[i] ≤ x < xs[i + 1], the first or
+    last one beyond the ends), walked to from interval ``start``."""
     last = xs.size - 2
-    i = min(max(int(aux[slot]), 0), last)
+    i = min(max(int(start), 0), last)
     while i > 0 and x < xs[i]:
         i -= 1
     while i < last and x >= xs[i + 1]:
         i += 1
+    return i
+
+
+@jit_inline
+def interp_near(xs: np.ndarray, ys: np.ndarray, x: float, aux: np.ndarray, slot: int) -> float:
+    """:func:`interp`, searching from the interval found last time (kept in ``aux[slot]``): the load
+    changes little between evaluations, so this walks 0-2 intervals instead of bisecting the table."""
+    i = table_interval(xs, x, aux[slot])
     aux[slot] = i
     return ys[i] + (x - xs[i]) * (ys[i + 1] - ys[i]) / (xs[i + 1] - xs[i])
 
