@@ -10,6 +10,7 @@ is following.
 
 from __future__ import annotations
 
+import threading
 from collections import Counter
 from typing import Any
 
@@ -17,12 +18,13 @@ from rclpy._rclpy_pybind11 import RCLError
 
 
 class RefusedPublishes:
-    """Publishes through :meth:`publish`: a refusal is counted per topic (:attr:`counts`, absolute names) and
-    logged on ``logger`` (throttled: one line per 10 s at most). Thread-safe as far as a counter increment under
-    the GIL is."""
+    """Publishes through :meth:`publish`: a refusal is counted per topic (absolute names; :meth:`counts`) and
+    logged on ``logger`` (throttled: one line per 10 s at most). The simulator publishes on its loop's
+    publishing thread and reports on the executor's, so the counts are kept under a lock."""
 
     def __init__(self, logger: Any) -> None:
-        self.counts: Counter[str] = Counter()
+        self._counts: Counter[str] = Counter()
+        self._lock = threading.Lock()
         self._logger = logger
 
     def publish(self, publisher: Any, message: Any) -> bool:
@@ -30,12 +32,15 @@ class RefusedPublishes:
         try:
             publisher.publish(message)
         except RCLError as err:
-            self.counts[publisher.topic_name] += 1
+            with self._lock:
+                self._counts[publisher.topic_name] += 1
+                total = self._counts.total()
             self._logger.warning(f'the middleware refused a message on {publisher.topic_name} (no subscriber got '
-                                 f'it; {self.total} refused since start): {err}', throttle_duration_sec=10.0)
+                                 f'it; {total} refused since start): {err}', throttle_duration_sec=10.0)
             return False
         return True
 
-    @property
-    def total(self) -> int:
-        return sum(self.counts.values())
+    def counts(self) -> dict[str, int]:
+        """Refusals since start, per topic (a copy)."""
+        with self._lock:
+            return dict(self._counts)

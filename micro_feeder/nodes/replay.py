@@ -351,9 +351,10 @@ def main(args: list[str] | None = None, tap: Callable[[Node], None] | None = Non
         progress.close()
         node.close()
         print(f'replay: {node.timing_report()}')
-        if node.refused.total:
-            print(f'replay: the middleware refused {node.refused.total} messages (no subscriber got them): '
-                  + ', '.join(f'{topic} {n}' for topic, n in sorted(node.refused.counts.items())), file=sys.stderr)
+        refused = node.refused.counts()
+        if refused:
+            print(f'replay: the middleware refused {sum(refused.values())} messages (no subscriber got them): '
+                  + ', '.join(f'{topic} {n}' for topic, n in sorted(refused.items())), file=sys.stderr)
         executor.shutdown()
         node.destroy_node()
         rclpy.shutdown()

@@ -323,11 +323,11 @@ class Simulator(Node):
         """The simulator's status (:func:`loop_status` of :meth:`Engine.snapshot`): achieved real-time factor
         over the time since the last call, tick timing, counters. Takes no lock, so it reports even while a
         tick is stuck."""
-        refused = self._outputs.refused
+        refused = self._outputs.refused.counts()
+        total = sum(refused.values())
         snapshot = self._engine.snapshot(pending_reset=self._params.pending, other_simulators=len(self.twins))
-        status = loop_status(dataclasses.replace(snapshot, refused=dict(refused.counts),
-                                                 refused_new=refused.total - self._refused_reported))
-        self._refused_reported = refused.total
+        status = loop_status(dataclasses.replace(snapshot, refused=refused, refused_new=total - self._refused_reported))
+        self._refused_reported = total
         if status.level != 0:
             self.get_logger().warning(status.message, throttle_duration_sec=10.0)
         return DiagnosticStatus(name=status_name(self, 'loop'), hardware_id='micro_feeder',
