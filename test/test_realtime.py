@@ -121,8 +121,9 @@ def test_loop_status_levels_and_values() -> None:
     assert loop_status(_snapshot(error='SimulationError: x')).message == 'SimulationError: x'
     assert loop_status(_snapshot(periods_ms=np.zeros(0))).values['tick_period_p99_ms'] == 'nan'
     assert ok.values['publishes_refused'] == '0'
-    refused = loop_status(_snapshot(refused={'/particle/pose': 4, '/clock': 1}, refused_new=2))
+    refused = loop_status(_snapshot(refused={'/particle/pose': 4, '/clock': 1}, refused_new={'/particle/pose': 2}))
     assert refused.level == WARN and 'refused 2 message(s)' in refused.message
+    assert '/particle/pose' in refused.message and '/clock' not in refused.message   # only where refusals are new
     assert refused.values['publishes_refused'] == '5' and refused.values['publishes_refused./clock'] == '1'
     assert loop_status(_snapshot(refused={'/clock': 1})).level == OK      # counted, nothing new to warn of
 

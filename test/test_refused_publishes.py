@@ -1,5 +1,5 @@
 """A message the middleware refuses to take (``RCLError: cannot publish data``) is counted and reported, and the
-simulator runs on. Before, a refusal ended the simulation for every subscriber.
+simulator (or the actuator) runs on. Before, a refusal ended the simulation for every subscriber.
 
 Fast DDS refuses a write when it cannot make room in a full writer history within ``max_blocking_time``. In a
 clean-clone CI run, a recorder that had been stopped (SIGSTOP) resumed and asked for repairs on a loaded machine,
@@ -14,13 +14,16 @@ from typing import Any
 
 import pytest
 from geometry_msgs.msg import PoseStamped
+from node_helpers import Probe
 from rclpy._rclpy_pybind11 import RCLError
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from ros_helpers import wait_until
+from std_srvs.srv import Trigger
 
 from micro_feeder.nodes._ros import topic_qos
+from micro_feeder.nodes.actuator import Actuator
 from micro_feeder.nodes.simulator import Simulator
 from micro_feeder.realtime.diagnostics import WARN
 
@@ -83,3 +86,32 @@ def test_a_refused_state_message_is_counted_and_the_simulator_runs_on(ros_contex
     assert 'refused' not in again.message                 # nothing new since: the count stays, the warning goes
     assert _values(again)['publishes_refused'] == str(REFUSED)
     assert poses == sorted(poses)                         # what did go out went out in order
+
+
+def test_a_refused_burst_is_reported_not_sent_and_the_actuator_runs_on(ros_context: Context) -> None:
+    """The actuator's burst the middleware refuses: the start service says it was not sent (no burst counted,
+    its number kept for the next), the actuator stays up, the next start sends it, and the actuator's
+    ``/diagnostics`` counts the refusal and warns. Before, the refusal raised out of the service callback."""
+    actuator = Actuator(context=ros_context, overrides={'auto_start': False, 'stroke.count': 2})
+    probe = Probe(context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(actuator)
+    executor.add_node(probe)
+    actuator._pub = RefusingPublisher(actuator._pub, 1)
+    try:
+        refused = probe.call(executor, Trigger, 'actuator/start')
+        assert refused.success and refused.message.startswith('burst not sent: the middleware refused it')
+        assert actuator.bursts == 0
+        sent = probe.call(executor, Trigger, 'actuator/start')
+        assert sent.message.startswith('burst sent'), sent.message
+        trajectories = probe.msgs['actuator/trajectory']
+        wait_until(lambda: trajectories, 10.0, executor=executor, what='the burst sent again')
+        assert trajectories[-1].header.frame_id.endswith(':b1') and actuator.bursts == 1
+
+        def stroke_status() -> Any:
+            return next((s for array in probe.msgs['/diagnostics'] for s in array.status
+                         if s.name.endswith(': stroke') and _values(s).get('publishes_refused') == '1'), None)
+        wait_until(stroke_status, 10.0, executor=executor, what="the actuator's /diagnostics after the refusal")
+        assert stroke_status().level == bytes([WARN])
+    finally:
+        executor.shutdown()

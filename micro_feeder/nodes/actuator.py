@@ -46,6 +46,7 @@ from ..sim.stream import StrokeStream, encode_stop, encode_window, points_per_me
 from ._ros import RefusalWatch, topic_qos
 from .goal_sender import COMMAND_INTERFACES, GoalSender
 from .parameters import check_changes, declare, values
+from .refused import RefusedPublishes
 from .spin import spin_node
 
 NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
@@ -96,6 +97,7 @@ class Actuator(Node):
         self._pending_stream = False                 # streamed start waiting for the first sim time
         self._instance = f'{self.get_fully_qualified_name()}@{time.time_ns():x}'   # names this run's commands
         self.refusals = RefusalWatch(self, self._instance + ':', self._on_refused)   # the simulator's answers
+        self.publishes = RefusedPublishes(self.get_logger())   # what the middleware refused to take, counted
         self.goals = GoalSender(self) if self.get_parameter('command_interface').value == 'action' else None
         self._graph_seen: frozenset[bytes] | None = None   # the trajectory subscriptions seen ready, and since when
         self._graph_since = 0.0
@@ -136,8 +138,10 @@ class Actuator(Node):
         if knots is not None:
             times, pos, vel, acc = knots
             n = pos.shape[1]
-            self._pub.publish(trajectory_cdr.encode(joint_names(n), np.round(times * 1e9), pos, vel, acc, Time(),
-                                                    self._command_id()))
+            if not self.publishes.publish(self._pub, trajectory_cdr.encode(
+                    joint_names(n), np.round(times * 1e9), pos, vel, acc, Time(), self._command_id())):
+                self.bursts -= 1                     # nothing of it went out: the next burst takes its number
+                return 'burst not sent: the middleware refused it (a subscriber stalled, or no CPU); start again'
             sent = f'burst sent: {times.size} knots on {n} joints, {times[-1]:.6g} s'
             if self._simulator_subscriptions():
                 return sent
@@ -240,7 +244,8 @@ class Actuator(Node):
         self._stream = None
         self._pending_stream = False
         n = len(self.get_parameter('stroke.phases').value)
-        self._pub.publish(JointTrajectory(joint_names=joint_names(n)))
+        if not self.publishes.publish(self._pub, JointTrajectory(joint_names=joint_names(n))):
+            return 'stop not sent: the middleware refused it (a subscriber stalled, or no CPU); stop again'
         self.stops += 1
         return 'stop sent'
 
@@ -274,12 +279,14 @@ class Actuator(Node):
             self.underruns += 'passed the strokes' in why
             self.get_logger().warning(f'stream re-phased: {why}', throttle_duration_sec=5.0)
         for number, window in enumerate(windows, start=stream.windows_made - len(windows) + 1):
-            self._pub.publish(encode_window(window, self._command_id(number)))
-            self.windows += 1
+            # a window the middleware refused is counted (publishes_refused, WARN) and not sent again: where the
+            # next one starts off the stroke in force, the simulator refuses it and the stream re-phases
+            # (_on_refused); where it starts at rest, the refused window's strokes are missing from the run
+            self.windows += self.publishes.publish(self._pub, encode_window(window, self._command_id(number)))
         if stream.done:
             self._stream = None
-            self._pub.publish(encode_stop(stream.n_actuators, stream.scheduled_until,
-                                          self._command_id(stream.windows_made + 1)))
+            self.publishes.publish(self._pub, encode_stop(stream.n_actuators, stream.scheduled_until,
+                                                          self._command_id(stream.windows_made + 1)))
 
     def _on_refused(self, command_id: str, reason: str) -> None:
         """The simulator refused one of this node's commands. When it is a window of the stream running that
@@ -371,18 +378,19 @@ class Actuator(Node):
                  'last_rephase': self.last_rephase,
                  'last_rephase_at': _seconds_text(getattr(self._stream, 'rephased_at', None)),
                  'streaming': self._stream is not None, 'subscribers': self._pub.get_subscription_count(),
-                 'commands_refused': self.refusals.refused, 'last_refusal': self.refusals.last}
+                 'commands_refused': self.refusals.refused, 'last_refusal': self.refusals.last,
+                 'publishes_refused': sum(self.publishes.counts().values())}
         if self.goals is not None:       # the goals' answers: refusals and failures come back in their results
             items.update({'goals_sent': self.goals.sent, 'goals_succeeded': self.goals.succeeded,
                           'goals_canceled': self.goals.canceled, 'commands_refused': self.goals.refused,
                           'last_refusal': self.goals.last})
-        troubled = self.rephases or items['commands_refused']
+        troubled = self.rephases or items['commands_refused'] or items['publishes_refused']
         status = DiagnosticStatus(name=f'{self.get_name()}: stroke', hardware_id='micro_feeder',
                                   level=DiagnosticStatus.WARN if troubled else DiagnosticStatus.OK,
                                   message=items['state'],
                                   values=[KeyValue(key=k, value=str(v)) for k, v in items.items()])
-        self._pub_diag.publish(DiagnosticArray(header=Header(stamp=self.get_clock().now().to_msg()),
-                                               status=[status]))
+        self.publishes.publish(self._pub_diag, DiagnosticArray(header=Header(stamp=self.get_clock().now().to_msg()),
+                                                               status=[status]))
 
 
 def _seconds_text(t: float | None) -> str:

@@ -96,7 +96,7 @@ class Simulator(Node):
         self._twin_guard.refuse_twin(created)
         self._outputs = SimulatorOutputs(self, self.stepper, publish_clock=p['publish_clock'],
                                          markers_period=1.0 / p['markers_rate'])
-        self._refused_reported = 0      # publishes the middleware refused, as of the last /diagnostics
+        self._refused_reported: dict[str, int] = {}   # publishes refused per topic, as of the last /diagnostics
         self._engine = Engine(self._session, self._outputs, self.get_logger(), lock=self._lock,
                               lockstep=p['lockstep'], rtf=p['real_time_factor'], step_period=p['step_period'],
                               period=1.0 / p['publish_rate'], start_paused=p['start_paused'],
@@ -324,10 +324,11 @@ class Simulator(Node):
         over the time since the last call, tick timing, counters. Takes no lock, so it reports even while a
         tick is stuck."""
         refused = self._outputs.refused.counts()
-        total = sum(refused.values())
+        new = {topic: n - self._refused_reported.get(topic, 0) for topic, n in refused.items()
+               if n > self._refused_reported.get(topic, 0)}
         snapshot = self._engine.snapshot(pending_reset=self._params.pending, other_simulators=len(self.twins))
-        status = loop_status(dataclasses.replace(snapshot, refused=refused, refused_new=total - self._refused_reported))
-        self._refused_reported = total
+        status = loop_status(dataclasses.replace(snapshot, refused=refused, refused_new=new))
+        self._refused_reported = refused
         if status.level != 0:
             self.get_logger().warning(status.message, throttle_duration_sec=10.0)
         return DiagnosticStatus(name=status_name(self, 'loop'), hardware_id='micro_feeder',

@@ -39,7 +39,7 @@ class LoopSnapshot:
     command_age: float = math.nan  # wall s since the last command arrived (nan: none yet)
     stream_silent: float = 0.0    # sim s since a stream's strokes ran out with no command after them
     refused: Mapping[str, int] = field(default_factory=dict)   # messages the middleware refused, per topic
-    refused_new: int = 0          # of them, since the last report
+    refused_new: Mapping[str, int] = field(default_factory=dict)   # of them, per topic, since the last report
 
 
 @dataclass(frozen=True)
@@ -75,9 +75,9 @@ def loop_status(s: LoopSnapshot) -> LoopStatus:
         level, message = WARN, (f'command source silent: the streamed strokes ran out {s.stream_silent:.3f} s of '
                                 f'sim time ago (last command {s.command_age:.1f} s ago, wall); strokes held')
     elif s.refused_new:
-        level, message = WARN, (f'the middleware refused {s.refused_new} message(s) since the last report, on '
-                                f'{", ".join(sorted(s.refused))}: no subscriber got them (a subscriber that '
-                                'stopped and resumed, or a machine out of CPU); the simulation goes on')
+        level, message = WARN, (f'the middleware refused {sum(s.refused_new.values())} message(s) since the last '
+                                f'report, on {", ".join(sorted(s.refused_new))}: no subscriber got them (a '
+                                'subscriber that stopped and resumed, or a machine out of CPU); the simulation goes on')
     elif lagging:
         level, message = WARN, (f'behind real time ({s.achieved_rtf:.3f} x): the ticks\' work (physics and '
                                 f'publishing, tick_compute_p99_ms {_pct(s.busy_ms, 99)}) or a busy CPU')
