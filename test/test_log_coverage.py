@@ -9,6 +9,7 @@ import json
 import shutil
 import subprocess
 import sys
+import threading
 import warnings
 from pathlib import Path
 
@@ -61,6 +62,47 @@ def test_a_removed_log_directory_is_restored_up_to_its_last_whole_chunk(tmp_path
     ends = next(line for line in info_text(path).splitlines() if line.startswith('ends'))
     assert ends.startswith('ends       early: recording stopped at sim time 0.349 s') and \
         'readable up to sim time 0.299 s' in ends and '50 messages received after that were cut' in ends, ends
+
+
+def written_log(path: Path) -> LogWriter:
+    """A directory log with 300 poses in whole chunks and 50 in the open one."""
+    writer = LogWriter(path, stop_on_error=True, stamp_topic='/particle/pose', flush_period=float('inf'))
+    writer.add_topic('/particle/pose', 'geometry_msgs/msg/PoseStamped')
+    for i in range(300):
+        writer.write('/particle/pose', serialize_message(pose(i)), T0 + i * MS)
+    writer.flush()
+    for i in range(300, 350):
+        writer.write('/particle/pose', serialize_message(pose(i)), T0 + i * MS)
+    return writer
+
+
+def test_a_directory_removal_found_between_its_file_and_its_directory_is_a_directory_removal(tmp_path):
+    """``rm -r`` unlinks the files, then the directory: a check in between must not restore the file into the
+    directory (the removal would fail: not empty) nor call it a deleted file."""
+    path = tmp_path / 'log'
+    writer = written_log(path)
+    (path / 'log_0.mcap').unlink()       # the removal has unlinked the log file, not yet the rest
+    rest = threading.Timer(0.1, shutil.rmtree, (path,))
+    rest.start()
+    fault = writer.check()
+    rest.join()
+    assert fault is not None and fault.reason == 'log directory removed', fault
+    writer.close()
+    log = complete(path)                 # restored where it was, up to its last whole chunk
+    assert log.recorder_info['stop_reason'] == 'log directory removed'
+    assert len(list(log.messages(['particle/pose']))) == 300
+
+
+def test_a_deleted_log_file_is_restored_and_named_a_deleted_file(tmp_path):
+    path = tmp_path / 'log'
+    writer = written_log(path)
+    (path / 'log_0.mcap').unlink()
+    fault = writer.check()
+    assert fault is not None and fault.reason == 'log file deleted', fault
+    assert 'log_0.mcap was deleted while recording' in fault.detail
+    log = complete(path)
+    assert log.recorder_info['stop_reason'] == 'log file deleted'
+    assert len(list(log.messages(['particle/pose']))) == 300
 
 
 FILL_TO_LIMIT = '''

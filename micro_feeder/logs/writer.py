@@ -42,6 +42,8 @@ LIBRARY = 'micro_feeder'
 CHUNK_SIZE = 1 << 20
 SIZE_CHECK_EVERY = 1000  # messages between two checks of the file size for splitting
 CHECK_PERIOD = 0.25      # s: at most this often, check that the log file is still where it was written
+REMOVAL_SETTLE = 0.5     # s: a log file deleted in a directory still there: wait this long for the directory to go
+REMOVAL_POLL = 0.01      # s: and look this often (a directory removal unlinks the files first)
 RESERVE_FILE = '.reserve'
 RESERVE_BYTES = 1 << 20  # room freed on a full disk to finish the log (its summary grows ~250 B per chunk)
 MAX_CHUNKS_DROPPED = 3   # whole chunks a file at its size limit may lose to make room for its summary
@@ -231,7 +233,7 @@ class LogWriter:
             self._failed(err, f'checking {self._current_name()}')
             return self.fault
         if deleted:
-            gone = not self.bare and not self.path.is_dir()
+            gone = not self.bare and self._directory_removed()
             what = 'log directory removed' if gone else 'log file deleted'
             self._stop(what, f'{self.path if gone else self._sink.path} was {"removed" if gone else "deleted"} '
                              'while recording', restore=True)
@@ -239,6 +241,17 @@ class LogWriter:
             self._stop('log file moved', f'{self._sink.path} was moved or replaced while recording (the moved '
                                          'file was finished where it is now)', restore=False)
         return self.fault
+
+    def _directory_removed(self) -> bool:
+        """True when the log directory goes within ``REMOVAL_SETTLE`` s: a directory removal unlinks the files
+        before the directory, and restoring the file in between would leave the remover a directory that is not
+        empty (``rm -r`` fails) and the log named as a deleted file."""
+        deadline = time.monotonic() + REMOVAL_SETTLE
+        while self.path.is_dir():
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(REMOVAL_POLL)
+        return True
 
     def stop(self, reason: str, detail: str) -> WriteFault | None:
         """Stop recording now for a reason found outside the writer (storage not responding ...): the log is
