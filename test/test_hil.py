@@ -170,7 +170,7 @@ def feed_controller(context: Context, target_x: float, delay_s: float):
         def send(self, msg):
             time.sleep(delay_s)
             self.slept_s += delay_s
-            super().send(msg)
+            return super().send(msg)
 
     return Delayed(context=context, overrides={'feed.target_x': target_x, 'lockstep': True})
 

@@ -100,7 +100,7 @@ def test_a_refused_burst_is_reported_not_sent_and_the_actuator_runs_on(ros_conte
     actuator._pub = RefusingPublisher(actuator._pub, 1)
     try:
         refused = probe.call(executor, Trigger, 'actuator/start')
-        assert refused.success and refused.message.startswith('burst not sent: the middleware refused it')
+        assert not refused.success and refused.message.startswith('burst not sent: the middleware refused it')
         assert actuator.bursts == 0
         sent = probe.call(executor, Trigger, 'actuator/start')
         assert sent.message.startswith('burst sent'), sent.message
@@ -115,3 +115,47 @@ def test_a_refused_burst_is_reported_not_sent_and_the_actuator_runs_on(ros_conte
         assert stroke_status().level == bytes([WARN])
     finally:
         executor.shutdown()
+
+
+def test_a_refused_auto_start_burst_is_sent_again(ros_context: Context) -> None:
+    """``auto_start``: the burst the middleware refused is sent again on the next tick and reaches the
+    simulator as the first burst (before, the refusal was logged and the burst never sent)."""
+    sim = Simulator(context=ros_context, namespace='/auto_refused', hold=True)
+    actuator = Actuator(context=ros_context, namespace='/auto_refused', overrides={'stroke.count': 1})
+    refusing = actuator._pub = RefusingPublisher(actuator._pub, 1)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(sim)
+    executor.add_node(actuator)
+    try:
+        wait_until(lambda: sim.commands.received >= 1, 30, executor=executor, what='the burst at the simulator')
+        assert refusing.refusals == 0 and actuator.bursts == 1
+        assert actuator.publishes.total() == 1
+        assert actuator.state() == 'idle'          # the auto-start timer is gone once the burst went out
+    finally:
+        executor.shutdown()
+
+
+def test_a_refused_controller_burst_is_fired_again_and_the_feed_ends_where_it_would_have(ros_context: Context) -> None:
+    """The feed controller's first burst refused by the middleware (lockstep): counted, and the same burst
+    fired at the next state; the feed takes the bursts it takes without the refusal and ends at the same x,
+    one step later. Before, the refusal raised out of the pose callback."""
+    from micro_feeder.nodes.feed_controller import FeedController
+    from micro_feeder.nodes.spin import spin_nodes
+
+    finals = {}
+    for refusals in (0, 1):
+        sim = Simulator(context=ros_context, overrides={'lockstep': True})
+        controller = FeedController(context=ros_context, overrides={'feed.target_x': 0.46e-3, 'lockstep': True})
+        refusing = controller._pub_trajectory = RefusingPublisher(controller._pub_trajectory, refusals)
+        try:
+            spin_nodes([sim, controller], lambda c=controller, s=sim: c.done or s.stepper.t > 1.0, ros_context)
+            assert refusing.refusals == 0 and controller.publishes.total() == refusals
+            finals[refusals] = (controller.planner.status, controller.planner.bursts, controller.commands_sent,
+                                sim.commands.received, sim.stepper.state.x, sim.stepper.state.t)
+        finally:
+            controller.destroy_node()
+            sim.destroy_node()
+    status, bursts, sent, received, x, t = finals[1]
+    assert status == 'reached' and finals[0][:4] == (status, bursts, sent, received) and bursts >= 2
+    assert abs(x - finals[0][4]) <= 1e-9, (x, finals[0][4])
+    assert t > finals[0][5]

@@ -100,14 +100,20 @@ def _wait_until_ready(session: Any, sim: Any, actuator: Any) -> None:
             out.append('the actuator\'s burst at the simulator')
         return out
 
+    from ..nodes.actuator import NotSent
+
     deadline = time.monotonic() + READY_TIMEOUT
     ready = Future()
     started = []
 
     def start() -> None:
         if not started:
+            try:
+                actuator.get_logger().info(actuator.start(held_at=sim.stepper.t))
+            except NotSent as err:      # refused: the next check sends it again
+                actuator.get_logger().warning(f'{err}: sending it again')
+                return
             started.append(True)
-            actuator.get_logger().info(actuator.start(held_at=sim.stepper.t))
 
     # checked by a timer that ends the spin at once (the spin's own checks come every 0.1 s: that held the run
     # at t = 0, and its log after the first pose, up to 100 ms longer than needed)

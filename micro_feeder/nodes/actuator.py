@@ -49,6 +49,13 @@ from .parameters import check_changes, declare, values
 from .refused import RefusedPublishes
 from .spin import spin_node
 
+REFUSED = 'the middleware refused it (a subscriber stalled, or no CPU)'
+
+
+class NotSent(RuntimeError):
+    """A burst or stop the middleware refused to take: nothing of it went out; sending it again may succeed."""
+
+
 NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
     'auto_start': (ParamSpec('send the burst once when a subscriber is connected', kind='bool', read_only=True),
                    True),
@@ -127,7 +134,8 @@ class Actuator(Node):
     def start(self, held_at: float | None = None) -> str:
         """Send the burst: whole when it is finite and fits in ``stream.max_points`` knots, else start
         streaming it; with ``command_interface`` action, as one FollowJointTrajectory goal. Returns a one-line
-        description; raises ValueError (nothing sent) for a streamed burst with the action. A stream starts
+        description; raises ValueError (nothing sent) for a streamed burst with the action, and
+        :class:`NotSent` when the middleware refused the burst (start again). A stream starts
         ``stream.lead`` after the sim time it sees first, or at ``held_at`` (s) when the caller holds the
         simulator there until the first window has reached it (``micro-feeder run``)."""
         knots = self._whole_burst_knots()
@@ -141,7 +149,7 @@ class Actuator(Node):
             if not self.publishes.publish(self._pub, trajectory_cdr.encode(
                     joint_names(n), np.round(times * 1e9), pos, vel, acc, Time(), self._command_id())):
                 self.bursts -= 1                     # nothing of it went out: the next burst takes its number
-                return 'burst not sent: the middleware refused it (a subscriber stalled, or no CPU); start again'
+                raise NotSent(f'burst not sent: {REFUSED}; start again')
             sent = f'burst sent: {times.size} knots on {n} joints, {times[-1]:.6g} s'
             if self._simulator_subscriptions():
                 return sent
@@ -235,7 +243,8 @@ class Actuator(Node):
 
     def stop(self) -> str:
         """End any stream and publish an empty trajectory (stop: hold the strokes where they are); with the
-        action, cancel the running goal (the simulator holds the strokes where they are)."""
+        action, cancel the running goal (the simulator holds the strokes where they are). Raises
+        :class:`NotSent` when the middleware refused the stop (stop again)."""
         if self.goals is not None:
             if not self.goals.cancel():
                 return f'no goal running: nothing to stop (the last one {self.goals.state})'
@@ -245,7 +254,7 @@ class Actuator(Node):
         self._pending_stream = False
         n = len(self.get_parameter('stroke.phases').value)
         if not self.publishes.publish(self._pub, JointTrajectory(joint_names=joint_names(n))):
-            return 'stop not sent: the middleware refused it (a subscriber stalled, or no CPU); stop again'
+            raise NotSent(f'stop not sent: {REFUSED}; stop again')
         self.stops += 1
         return 'stop sent'
 
@@ -315,17 +324,21 @@ class Actuator(Node):
     # -- ROS callbacks --------------------------------------------------------------------------------
 
     def _auto_start(self) -> None:
-        """Send the burst once, when the simulator is there (:meth:`simulator_ready`). The timer is gone after
-        the first start: a tick the executor had already queued finds ``_auto`` None and does nothing."""
+        """Send the burst once, when the simulator is there (:meth:`simulator_ready`); a burst the middleware
+        refused is sent again on the next tick. The timer is gone after the start: a tick the executor had
+        already queued finds ``_auto`` None and does nothing."""
         ready = self.goals.ready() if self.goals is not None else self.simulator_ready()
         if self._auto is None or not ready:
             return
-        self.destroy_timer(self._auto)
-        self._auto = None
         try:
             self.get_logger().info(self.start())
+        except NotSent as err:
+            self.get_logger().warning(f'auto_start: {err}: sending it again')
+            return
         except ValueError as err:
             self.get_logger().error(f'auto_start: nothing sent: {err}')
+        self.destroy_timer(self._auto)
+        self._auto = None
 
     def destroy_node(self) -> None:
         """Wait (up to :data:`ACK_TIMEOUT_S`) until every subscriber acknowledged what was sent, then destroy:
@@ -353,12 +366,15 @@ class Actuator(Node):
     def _on_start(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
         try:
             response.success, response.message = True, self.start()
-        except ValueError as err:
+        except (ValueError, NotSent) as err:
             response.success, response.message = False, str(err)
         return response
 
     def _on_stop(self, _request: Trigger.Request, response: Trigger.Response) -> Trigger.Response:
-        response.success, response.message = True, self.stop()
+        try:
+            response.success, response.message = True, self.stop()
+        except NotSent as err:
+            response.success, response.message = False, str(err)
         return response
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
@@ -379,7 +395,7 @@ class Actuator(Node):
                  'last_rephase_at': _seconds_text(getattr(self._stream, 'rephased_at', None)),
                  'streaming': self._stream is not None, 'subscribers': self._pub.get_subscription_count(),
                  'commands_refused': self.refusals.refused, 'last_refusal': self.refusals.last,
-                 'publishes_refused': sum(self.publishes.counts().values())}
+                 'publishes_refused': self.publishes.total()}
         if self.goals is not None:       # the goals' answers: refusals and failures come back in their results
             items.update({'goals_sent': self.goals.sent, 'goals_succeeded': self.goals.succeeded,
                           'goals_canceled': self.goals.canceled, 'commands_refused': self.goals.refused,

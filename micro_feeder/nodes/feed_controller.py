@@ -43,6 +43,7 @@ from ..sim.stream import sample_waveform
 from ._ros import RefusalWatch, status_name, topic_qos
 from .goal_sender import COMMAND_INTERFACES, GoalSender
 from .parameters import declare, values
+from .refused import RefusedPublishes
 from .spin import spin_node
 
 NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
@@ -92,6 +93,7 @@ class FeedController(Node):
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', topic_qos('/diagnostics'))
         self._instance = f'{self.get_fully_qualified_name()}@{time.time_ns():x}'   # names this run's bursts
         self.refusals = RefusalWatch(self, self._instance + ':')    # the simulator's answers to them
+        self.publishes = RefusedPublishes(self.get_logger())   # what the middleware refused to take, counted
         self.goals = (GoalSender(self, on_handled=self._grant_step)   # a goal is not a grant
                       if self.get_parameter('command_interface').value == 'action' else None)
         self.create_subscription(PoseStamped, 'particle/pose', self._on_pose, topic_qos('particle/pose'))
@@ -105,6 +107,7 @@ class FeedController(Node):
         self._poses: dict[int, PoseStamped] = {}
         self._twists: dict[int, TwistStamped] = {}
         self._burst: Burst | None = None
+        self._unsent: Burst | None = None    # the burst the middleware refused: fired again at the next decision
         self._burst_from_x = 0.0
         self._quiet_after = 0.0          # sim time (s) before which the part is not judged at rest
         self.start_time: float | None = None
@@ -160,7 +163,7 @@ class FeedController(Node):
         if self._burst is not None:
             self.planner.observe(self._burst, self._burst_from_x, x)
             self._burst = None
-        burst = self.planner.next_burst(x)
+        burst, self._unsent = (self._unsent or self.planner.next_burst(x)), None
         if burst is None:
             self._finish(t, x)
             return
@@ -191,18 +194,23 @@ class FeedController(Node):
         start = t if self._lockstep else t + self._lead + (time.perf_counter() - building)
         msg.header.stamp = stamps.to_time(start)
         msg.header.frame_id = f'{self._instance}:b{self.commands_sent + 1}'
+        if not self.send(msg):          # refused: fired again (the same burst) when the next state comes
+            self._unsent = burst
+            self._grant_step()          # lockstep: the command was to be the grant
+            return
         self._burst, self._burst_from_x = burst, x
         self._quiet_after = start + stroke.burst_end_s() + self._settle
-        self.send(msg)
 
-    def send(self, msg: JointTrajectory) -> None:
+    def send(self, msg: JointTrajectory) -> bool:
         """Publish a command (in lockstep it also grants the simulator its next step), or send it as a goal
-        (the grant follows once the simulator has handled it)."""
+        (the grant follows once the simulator has handled it); False when the middleware refused it (counted
+        in ``publishes_refused``, nothing sent)."""
         if self.goals is not None:
             self.goals.send(msg)
-        else:
-            self._pub_trajectory.publish(msg)
+        elif not self.publishes.publish(self._pub_trajectory, msg):
+            return False
         self.commands_sent += 1
+        return True
 
     def _grant_step(self) -> None:
         if self._step_client is not None:
@@ -217,7 +225,7 @@ class FeedController(Node):
 
     def _finish(self, t: float, x: float) -> None:
         self.finish_time = t
-        self._pub_status.publish(String(data=self.status_text()))
+        self.publishes.publish(self._pub_status, String(data=self.status_text()))
         self.get_logger().info(self.status_text())
         self._publish_diagnostics()
 
@@ -265,9 +273,10 @@ class FeedController(Node):
                                   message=self.status_text(),
                                   values=[KeyValue(key=k, value=str(v)) for k, v in
                                           {**self.result(), 'commands_refused': refused,
-                                           'last_refusal': last}.items()])
-        self._pub_diag.publish(DiagnosticArray(header=Header(stamp=stamps.to_time(self.last_t)),
-                                               status=[status]))
+                                           'last_refusal': last,
+                                           'publishes_refused': self.publishes.total()}.items()])
+        self.publishes.publish(self._pub_diag, DiagnosticArray(header=Header(stamp=stamps.to_time(self.last_t)),
+                                                               status=[status]))
 
 
 def main(args: list[str] | None = None) -> int:

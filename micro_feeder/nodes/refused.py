@@ -44,3 +44,8 @@ class RefusedPublishes:
         """Refusals since start, per topic (a copy)."""
         with self._lock:
             return dict(self._counts)
+
+    def total(self) -> int:
+        """Refusals since start, on every topic."""
+        with self._lock:
+            return self._counts.total()
