@@ -163,7 +163,8 @@ class FeedController(Node):
         if self._burst is not None:
             self.planner.observe(self._burst, self._burst_from_x, x)
             self._burst = None
-        burst, self._unsent = (self._unsent or self.planner.next_burst(x)), None
+        burst = self._unsent if self._unsent is not None else self.planner.next_burst(x)
+        self._unsent = None
         if burst is None:
             self._finish(t, x)
             return
