@@ -10,9 +10,11 @@ node, middleware and subscriber.
 
 from __future__ import annotations
 
+import itertools
 from typing import Any
 
 import pytest
+from builtin_interfaces.msg import Time
 from geometry_msgs.msg import PoseStamped
 from node_helpers import Probe
 from rclpy._rclpy_pybind11 import RCLError
@@ -20,8 +22,12 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from ros_helpers import wait_until
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
 from std_srvs.srv import Trigger
+from trajectory_msgs.msg import JointTrajectory
 
+from micro_feeder.interface.names import split_window_id
 from micro_feeder.nodes._ros import topic_qos
 from micro_feeder.nodes.actuator import Actuator
 from micro_feeder.nodes.simulator import Simulator
@@ -33,14 +39,18 @@ REFUSED = 3
 
 
 class RefusingPublisher:
-    """A real publisher whose first ``refusals`` messages the middleware 'refuses', as Fast DDS does."""
+    """A real publisher whose ``refusals`` messages after the first ``after`` the middleware 'refuses', as
+    Fast DDS does."""
 
-    def __init__(self, publisher: Any, refusals: int) -> None:
+    def __init__(self, publisher: Any, refusals: int, after: int = 0) -> None:
         self._publisher = publisher
         self.refusals = refusals
+        self.after = after              # messages let through before the refusals
 
     def publish(self, message: Any) -> None:
-        if self.refusals:
+        if self.after:
+            self.after -= 1
+        elif self.refusals:
             self.refusals -= 1
             raise RCLError('Failed to publish: cannot publish data, at /project/src/rmw_publish.cpp:68')
         self._publisher.publish(message)
@@ -159,3 +169,57 @@ def test_a_refused_controller_burst_is_fired_again_and_the_feed_ends_where_it_wo
     assert status == 'reached' and finals[0][:4] == (status, bursts, sent, received) and bursts >= 2
     assert abs(x - finals[0][4]) <= 1e-9, (x, finals[0][4])
     assert t > finals[0][5]
+
+
+class StreamedSimulator(Node):
+    """What the actuator takes for a simulator (it subscribes to actuator/trajectory and publishes
+    actuator/joint_states): publishes the sim times it is given and keeps the windows it receives."""
+
+    def __init__(self, context: Context) -> None:
+        super().__init__('simulator', context=context)
+        self.windows: list[JointTrajectory] = []
+        self.create_subscription(JointTrajectory, 'actuator/trajectory', self.windows.append,
+                                 topic_qos('actuator/trajectory'))
+        self._sim_time = self.create_publisher(JointState, 'actuator/joint_states', topic_qos('actuator/joint_states'))
+
+    def tick(self, t_ns: int) -> None:
+        self._sim_time.publish(JointState(header=Header(stamp=Time(sec=t_ns // 10**9, nanosec=t_ns % 10**9)),
+                                          name=['piezo_0'], position=[0.0]))
+
+
+def _ns(stamp: Any) -> int:
+    return stamp.sec * 10**9 + stamp.nanosec
+
+
+def test_a_refused_stream_window_is_sent_again_and_no_strokes_go_missing(ros_context: Context) -> None:
+    """An endless stream whose third message the middleware refuses: the window is counted and sent again,
+    in order, at the next sim time, so the windows the simulator gets still continue one another knot for knot
+    (each starts where the one before ends). Before, the refused window was counted and dropped: a gap of its
+    1.5 ms of strokes."""
+    actuator = Actuator(context=ros_context, overrides={'auto_start': False, 'stroke.count': 0,
+                                                         'stream.lead': 0.004, 'stream.window': 0.0015})
+    simulator = StreamedSimulator(ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(actuator)
+    executor.add_node(simulator)
+    refusing = actuator._pub = RefusingPublisher(actuator._pub, 1, after=2)
+    try:
+        wait_until(actuator.simulator_ready, 10.0, executor=executor, what='the actuator reaches the simulator')
+        simulator.tick(0)
+        wait_until(lambda: actuator.sim_time == 0.0, 10.0, executor=executor, what='sim time at the actuator')
+        assert actuator.start().startswith('burst streamed from t = 0.004')
+        for ms in range(1, 21):
+            simulator.tick(ms * 10**6)
+            wait_until(lambda ms=ms: abs(actuator.sim_time - ms * 1e-3) < 1e-12, 10.0, executor=executor,
+                       what='the actuator at sim time')
+        wait_until(lambda: len(simulator.windows) == actuator.windows, 10.0, executor=executor,
+                   what='every window sent received')
+        assert refusing.refusals == 0 and actuator.publishes.total() == 1 and actuator.rephases == 0
+        windows = simulator.windows
+        assert len(windows) >= 14 and _ns(windows[0].header.stamp) == 4_000_000   # 20 ms of strokes, 1.5 ms each
+        for before, after in itertools.pairwise(windows):
+            end = _ns(before.header.stamp) + _ns(before.points[-1].time_from_start)
+            assert _ns(after.header.stamp) == end, (before.header.frame_id, after.header.frame_id)
+        assert [split_window_id(w.header.frame_id)[1] for w in windows] == list(range(1, len(windows) + 1))
+    finally:
+        executor.shutdown()

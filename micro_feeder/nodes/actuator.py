@@ -20,6 +20,7 @@ burst's length.
 from __future__ import annotations
 
 import time
+from collections import deque
 from collections.abc import Mapping
 from typing import Any
 
@@ -102,6 +103,8 @@ class Actuator(Node):
         self.sim_time: float | None = None           # latest sim time seen on actuator/joint_states (s)
         self._stream: StrokeStream | None = None
         self._pending_stream = False                 # streamed start waiting for the first sim time
+        # the stream's messages the middleware refused, in order (window or not, message): sent again first
+        self._outbox: deque[tuple[bool, bytes]] = deque()
         self._instance = f'{self.get_fully_qualified_name()}@{time.time_ns():x}'   # names this run's commands
         self.refusals = RefusalWatch(self, self._instance + ':', self._on_refused)   # the simulator's answers
         self.publishes = RefusedPublishes(self.get_logger())   # what the middleware refused to take, counted
@@ -142,6 +145,7 @@ class Actuator(Node):
         if self.goals is not None:
             return self._send_goal(knots)
         self._stream = None
+        self._outbox.clear()
         self.bursts += 1
         if knots is not None:
             times, pos, vel, acc = knots
@@ -252,6 +256,7 @@ class Actuator(Node):
             return 'cancel sent'
         self._stream = None
         self._pending_stream = False
+        self._outbox.clear()
         n = len(self.get_parameter('stroke.phases').value)
         if not self.publishes.publish(self._pub, JointTrajectory(joint_names=joint_names(n))):
             raise NotSent(f'stop not sent: {REFUSED}; stop again')
@@ -283,19 +288,30 @@ class Actuator(Node):
             return
         windows, why = stream.follow(now, self.get_parameter('stream.lead').value, new_simulator=new_simulator)
         if why is not None:
+            self._outbox.clear()                     # they continued the strokes before the re-phase
             self.rephases += 1
             self.last_rephase = why
             self.underruns += 'passed the strokes' in why
             self.get_logger().warning(f'stream re-phased: {why}', throttle_duration_sec=5.0)
         for number, window in enumerate(windows, start=stream.windows_made - len(windows) + 1):
-            # a window the middleware refused is counted (publishes_refused, WARN) and not sent again: where the
-            # next one starts off the stroke in force, the simulator refuses it and the stream re-phases
-            # (_on_refused); where it starts at rest, the refused window's strokes are missing from the run
-            self.windows += self.publishes.publish(self._pub, encode_window(window, self._command_id(number)))
+            self._outbox.append((True, encode_window(window, self._command_id(number))))
         if stream.done:
             self._stream = None
-            self.publishes.publish(self._pub, encode_stop(stream.n_actuators, stream.scheduled_until,
-                                                          self._command_id(stream.windows_made + 1)))
+            self._outbox.append((False, encode_stop(stream.n_actuators, stream.scheduled_until,
+                                                    self._command_id(stream.windows_made + 1))))
+        self._send_outbox()
+
+    def _send_outbox(self) -> None:
+        """Send the stream's messages in order, up to the first the middleware refuses (counted:
+        ``publishes_refused``, WARN); that one and those after it go again at the next sim time, so no strokes
+        go missing. If a window has become late by then, the simulator refuses it (and the windows continuing
+        it) and the stream re-phases (:meth:`_on_refused`)."""
+        while self._outbox:
+            is_window, message = self._outbox[0]
+            if not self.publishes.publish(self._pub, message):
+                return
+            self._outbox.popleft()
+            self.windows += is_window
 
     def _on_refused(self, command_id: str, reason: str) -> None:
         """The simulator refused one of this node's commands. When it is a window of the stream running that
@@ -308,6 +324,7 @@ class Actuator(Node):
             return
         why = self._stream.refused(window[1], self.sim_time, self.get_parameter('stream.lead').value)
         if why is not None:
+            self._outbox.clear()                     # they continue the refused window: refused as well
             self.rephases += 1
             self.last_rephase = why
             self.get_logger().warning(f'stream re-phased: {why}', throttle_duration_sec=5.0)
@@ -320,6 +337,8 @@ class Actuator(Node):
             self.get_logger().info(f'burst streamed from t = {origin_ns * 1e-9:.9f} s (sim time)')
         elif self._stream is not None:
             self._feed(self.sim_time)
+        elif self._outbox:                           # a finished stream's last window or stop, refused
+            self._send_outbox()
 
     # -- ROS callbacks --------------------------------------------------------------------------------
 
