@@ -40,15 +40,21 @@ def info_text(path: Path) -> str:
     return format_summary(summary, coverage(log, summary.recorder, summary.part.stamp))
 
 
-def test_a_removed_log_directory_is_restored_up_to_its_last_whole_chunk(tmp_path):
-    path = tmp_path / 'log'
+def written_log(path: Path) -> LogWriter:
+    """A directory log with 300 poses in whole chunks and 50 in the open one."""
     writer = LogWriter(path, stop_on_error=True, stamp_topic='/particle/pose', flush_period=float('inf'))
     writer.add_topic('/particle/pose', 'geometry_msgs/msg/PoseStamped')
     for i in range(300):
         writer.write('/particle/pose', serialize_message(pose(i)), T0 + i * MS)
-    writer.flush()                       # 300 poses in whole chunks
-    for i in range(300, 350):            # 50 in the open chunk
+    writer.flush()
+    for i in range(300, 350):
         writer.write('/particle/pose', serialize_message(pose(i)), T0 + i * MS)
+    return writer
+
+
+def test_a_removed_log_directory_is_restored_up_to_its_last_whole_chunk(tmp_path):
+    path = tmp_path / 'log'
+    writer = written_log(path)           # 300 poses in whole chunks, 50 in the open chunk
     shutil.rmtree(path)
     fault = writer.check()
     assert fault is not None and fault.reason == 'log directory removed'
@@ -62,18 +68,6 @@ def test_a_removed_log_directory_is_restored_up_to_its_last_whole_chunk(tmp_path
     ends = next(line for line in info_text(path).splitlines() if line.startswith('ends'))
     assert ends.startswith('ends       early: recording stopped at sim time 0.349 s') and \
         'readable up to sim time 0.299 s' in ends and '50 messages received after that were cut' in ends, ends
-
-
-def written_log(path: Path) -> LogWriter:
-    """A directory log with 300 poses in whole chunks and 50 in the open one."""
-    writer = LogWriter(path, stop_on_error=True, stamp_topic='/particle/pose', flush_period=float('inf'))
-    writer.add_topic('/particle/pose', 'geometry_msgs/msg/PoseStamped')
-    for i in range(300):
-        writer.write('/particle/pose', serialize_message(pose(i)), T0 + i * MS)
-    writer.flush()
-    for i in range(300, 350):
-        writer.write('/particle/pose', serialize_message(pose(i)), T0 + i * MS)
-    return writer
 
 
 def test_a_directory_removal_found_between_its_file_and_its_directory_is_a_directory_removal(tmp_path):
