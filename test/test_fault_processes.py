@@ -83,8 +83,9 @@ def test_fifty_separate_actuator_starts_are_each_applied_and_logged_once(ros_con
                                                                          tmp_path: Path) -> None:
     """A recorder on the graph used to start an actuator before the simulator listened (the burst lost), and
     a second tick of the start timer sent it twice; 50 actuators started against a running simulator and
-    recorder now give 50 bursts, each received and applied once under its own identity, every receipt
-    logged once, and every burst logged once (the simulator's copy)."""
+    recorder now give 50 bursts, each applied once under its own identity (a burst lost in discovery all
+    the same is sent again until its receipt, and the copy refused as a duplicate), every receipt logged
+    once, and every message received logged once (the simulator's copy)."""
     sim = start_process('simulator')
     recorder = start_process('recorder', '-p', f'output:={tmp_path / "log"}')
     watcher = Watcher(ros_context)
@@ -118,25 +119,32 @@ def test_fifty_separate_actuator_starts_are_each_applied_and_logged_once(ros_con
         recorder_code, recorder_out = stop_process(recorder)
         stop_process(sim)
     identities = [command_id for _, topic, command_id in watcher.receipts if topic == 'actuator/trajectory']
-    assert len(identities) == STARTS and len(set(identities)) == STARTS, Counter(identities).most_common(3)
-    assert len({command_id.split('@')[0] for command_id in identities}) == STARTS     # one per actuator
-    assert simulator_status['rejected_commands'] == '0' and simulator_status['commands_received'] == str(STARTS)
+    # a burst lost in discovery is sent again until its receipt: its copies are received and refused as
+    # duplicates, so each burst is applied once whatever arrived twice
+    applied = set(identities)
+    copies = len(identities) - len(applied)
+    assert len(applied) == STARTS, Counter(identities).most_common(3)
+    assert len({command_id.split('@')[0] for command_id in applied}) == STARTS     # one burst per actuator
+    assert simulator_status['rejected_commands'] == '0'
+    assert simulator_status['commands_received'] == str(len(identities))
+    assert simulator_status['commands_repeated'] == str(copies)
     assert recorder_code == 0, recorder_out
     log = LogReader(tmp_path / 'log')
     logged_receipts = [split_receipt_frame(m.message.frame_id)[1]
                        for m in log.messages(['simulator/command_receipts'], decoded=True)]
     assert sorted(logged_receipts) == sorted(identities)        # every receipt logged, once
-    # every burst in the log once, in the simulator's copy of what it received, whatever the recorder had
-    # discovered of each new actuator when its burst went (seconds late, on a loaded machine)
+    # every message received in the log once, in the simulator's copy of what it received, whatever the
+    # recorder had discovered of each new actuator when its burst went (seconds late, on a loaded machine)
     held = Counter(m.message.header.frame_id
                    for m in log.messages(['simulator/trajectories_received'], decoded=True))
-    assert sorted(held) == sorted(identities) and max(held.values()) == 1, held.most_common(3)
+    assert held == Counter(identities), (held - Counter(identities), Counter(identities) - held)
     assert log.command_source('actuator/trajectory') == '/simulator/trajectories_received'
     # the senders' topic as the recorder saw it: a burst sent before the recorder matched its sender is
-    # missing there, never twice
+    # missing there, and one sent again may be there twice
     logged = Counter(m.message.header.frame_id for m in log.messages(['actuator/trajectory'], decoded=True))
-    assert set(logged) <= set(identities) and max(logged.values()) == 1, logged.most_common(3)
-    print(f'the log holds {len(held)} of {STARTS} bursts received, {len(logged)} as the recorder saw them sent')
+    assert set(logged) <= applied, set(logged) - applied
+    print(f'the log holds {len(held)} of {STARTS} bursts received ({copies} sent again and refused as '
+          f'duplicates), {len(logged)} as the recorder saw them sent')
 
 
 def _stream_rig(ros_context: Context) -> tuple:

@@ -27,6 +27,7 @@ from rclpy.task import Future
 from ..interface.names import split_receipt_frame
 from ..interface.topics import TOPICS_BY_NAME
 from ..logs.metadata import qos_profile
+from ..sim.commands import DUPLICATE
 
 SPIN_SLICE = 0.1  # s: longest delay between a signal and the spin loop noticing it
 
@@ -122,11 +123,13 @@ SERVICE_QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE, dur
 class RefusalWatch:
     """A command sender's view of ``simulator/command_status``: the simulator's refusals of the commands whose
     identity (``header.frame_id``) starts with ``prefix``, counted, the last reason kept, logged on ``node``'s
-    logger (throttled: one line per 5 s at most) and passed to ``on_refused`` (the refused identity, the reason)."""
+    logger (throttled: one line per 5 s at most) and passed to ``on_refused`` (the refused identity, the reason).
+    A duplicate (a copy of a command the simulator applied) is passed on but counted apart, unlogged."""
 
     def __init__(self, node: Any, prefix: str, on_refused: Callable[[str, str], None] | None = None):
         self._node, self._prefix, self._on_refused = node, prefix, on_refused
         self.refused = 0
+        self.repeated = 0           # duplicates the simulator did not apply again (not counted in ``refused``)
         self.last = ''
         node.create_subscription(DiagnosticArray, 'simulator/command_status', self._on_status,
                                  topic_qos('simulator/command_status'))
@@ -135,9 +138,12 @@ class RefusalWatch:
         _topic, command_id = split_receipt_frame(msg.header.frame_id)
         if not command_id.startswith(self._prefix):
             return
-        self.refused += 1
         reason = msg.status[0].message if msg.status else ''
-        self.last = f'{command_id}: {reason}'
-        self._node.get_logger().warning(f'the simulator refused {self.last}', throttle_duration_sec=5.0)
+        if DUPLICATE in reason:      # a copy of a command applied (sent again until its receipt): no fault
+            self.repeated += 1
+        else:
+            self.refused += 1
+            self.last = f'{command_id}: {reason}'
+            self._node.get_logger().warning(f'the simulator refused {self.last}', throttle_duration_sec=5.0)
         if self._on_refused is not None:
             self._on_refused(command_id, reason)

@@ -49,6 +49,7 @@ from .goal_sender import COMMAND_INTERFACES, GoalSender
 from .parameters import check_changes, declare, values
 from .refused import RefusedPublishes
 from .spin import spin_node
+from .until_receipt import UntilReceipt
 
 REFUSED = 'the middleware refused it (a subscriber stalled, or no CPU)'
 
@@ -108,6 +109,9 @@ class Actuator(Node):
         self._instance = f'{self.get_fully_qualified_name()}@{time.time_ns():x}'   # names this run's commands
         self.refusals = RefusalWatch(self, self._instance + ':', self._on_refused)   # the simulator's answers
         self.publishes = RefusedPublishes(self.get_logger())   # what the middleware refused to take, counted
+        # a whole burst is sent again until the simulator's receipt names it (lost in discovery otherwise)
+        self.delivery = UntilReceipt(self, lambda data: self.publishes.publish(self._pub, data),
+                                     lambda: bool(self._simulator_subscriptions()))
         self.goals = GoalSender(self) if self.get_parameter('command_interface').value == 'action' else None
         self._graph_seen: frozenset[bytes] | None = None   # the trajectory subscriptions seen ready, and since when
         self._graph_since = 0.0
@@ -146,12 +150,16 @@ class Actuator(Node):
             return self._send_goal(knots)
         self._stream = None
         self._outbox.clear()
+        self.delivery.settle()
         self.bursts += 1
         if knots is not None:
             times, pos, vel, acc = knots
             n = pos.shape[1]
-            if not self.publishes.publish(self._pub, trajectory_cdr.encode(
-                    joint_names(n), np.round(times * 1e9), pos, vel, acc, Time(), self._command_id())):
+            burst = trajectory_cdr.encode(joint_names(n), np.round(times * 1e9), pos, vel, acc, Time(),
+                                          self._command_id())
+            self.delivery.expect(self._command_id(), burst)
+            if not self.publishes.publish(self._pub, burst):
+                self.delivery.settle()
                 self.bursts -= 1                     # nothing of it went out: the next burst takes its number
                 raise NotSent(f'burst not sent: {REFUSED}; start again')
             sent = f'burst sent: {times.size} knots on {n} joints, {times[-1]:.6g} s'
@@ -257,6 +265,7 @@ class Actuator(Node):
         self._stream = None
         self._pending_stream = False
         self._outbox.clear()
+        self.delivery.settle()
         n = len(self.get_parameter('stroke.phases').value)
         if not self.publishes.publish(self._pub, JointTrajectory(joint_names=joint_names(n))):
             raise NotSent(f'stop not sent: {REFUSED}; stop again')
@@ -318,6 +327,7 @@ class Actuator(Node):
         was not applied (late, or continuing one that was; a duplicate's first copy was applied), re-phase the
         stream, so that what follows is applied (:meth:`StrokeStream.refused`); the
         windows already sent after it are refused as well."""
+        self.delivery.settle(command_id)
         window = split_window_id(command_id)
         if (window is None or window[0] != self._command_id() or self._stream is None or self.sim_time is None
                 or DUPLICATE in reason):
@@ -407,7 +417,8 @@ class Actuator(Node):
 
     def _publish_diagnostics(self) -> None:
         reached = bool(self._simulator_subscriptions())
-        items = {'state': self.state(reached), 'bursts_sent': self.bursts, 'stops_sent': self.stops,
+        items = {'state': self.state(reached), 'bursts_sent': self.bursts, 'bursts_resent': self.delivery.resent,
+                 'stops_sent': self.stops,
                  'windows_sent': self.windows, 'stream_underruns': self.underruns, 'stream_rephases': self.rephases,
                  'simulator_reached': reached,
                  'last_rephase': self.last_rephase,

@@ -56,20 +56,22 @@ class Outcome:
 @dataclass
 class IntakeCounters:
     """Since start: messages received, coalesced (superseded before parsing), dropped (queue full),
-    refused (invalid or too large: the node's ``rejected_commands``), late (a trajectory stamped before
+    refused (invalid or too large: the node's ``rejected_commands``), repeated (a copy of a trajectory
+    already applied, by its identity: not applied again, not a fault), late (a trajectory stamped before
     the sim time it was applied at: its knots before that time were dropped)."""
 
     received: int = 0
     coalesced: int = 0
     dropped: int = 0
     refused: int = 0
+    repeated: int = 0
     late: int = 0
     last_refusal: str = ''
 
     def as_items(self) -> dict[str, str]:
         return {'commands_received': str(self.received), 'commands_coalesced': str(self.coalesced),
                 'commands_dropped': str(self.dropped), 'rejected_commands': str(self.refused),
-                'commands_late': str(self.late),
+                'commands_repeated': str(self.repeated), 'commands_late': str(self.late),
                 'last_rejection': self.last_refusal}
 
 

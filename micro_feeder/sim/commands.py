@@ -43,6 +43,11 @@ class CommandRejected(ValueError):
 DUPLICATE = 'a duplicate of the command applied'   # in the reason of a refused duplicate: its first copy applied
 
 
+class DuplicateCommand(CommandRejected):
+    """A copy of a command already applied (same identity): not applied again. A sender that resends until
+    the receipt names its command (a message lost in discovery) makes these; they are not faults."""
+
+
 @dataclass(frozen=True)
 class TrajectoryCommand:
     """A checked ``actuator/trajectory``: knots in the simulator's joint order, SI units.

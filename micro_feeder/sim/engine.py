@@ -298,7 +298,8 @@ class Engine:
 
     def _process_commands(self, batch: list[Received]) -> None:
         """Plan ``batch`` (parsing outside the lock), then acknowledge and apply it in arrival order
-        between two ticks; in lockstep each command grants its step. A refusal is answered."""
+        between two ticks; in lockstep each command grants its step (a duplicate of one applied does not: a
+        command applies once). A refusal is answered."""
         session, outputs = self.session, self._outputs
         generation = session.generation
         outcomes = session.plan(batch)
@@ -309,9 +310,11 @@ class Engine:
             for outcome in outcomes:
                 t = self.stepper.t
                 if self.lockstep:
+                    repeated = session.commands.repeated
                     outputs.acknowledge(outcome.received, t)
                     outputs.answer(outcome.received, t, session.apply(outcome))
-                    self._grant_step()
+                    if session.commands.repeated == repeated:   # a copy of a command applied grants nothing
+                        self._grant_step()
                 else:
                     receipts.append((outcome.received, t, session.apply(outcome)))
         for received, t, refusal in receipts:

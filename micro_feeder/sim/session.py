@@ -30,7 +30,14 @@ from ..interface.entity_changes import DELETED, SPAWNED, EntityChange
 from ..interface.names import joint_names
 from ..physics.dynamics import FeederModel, Observation, SimulationError
 from ..realtime.intake import IntakeCounters, Outcome, Received, ThrottledLog, plan
-from .commands import TrajectoryCommand, parse_setpoints, parse_trajectory, parse_trajectory_cdr, start_time
+from .commands import (
+    DuplicateCommand,
+    TrajectoryCommand,
+    parse_setpoints,
+    parse_trajectory,
+    parse_trajectory_cdr,
+    start_time,
+)
 from .stepper import Stepper
 
 
@@ -98,6 +105,9 @@ class Session:
             else:
                 self.stepper.command_setpoints(command)
                 self.stream_open = False
+        except DuplicateCommand as err:
+            self.commands.repeated += 1
+            return str(err)
         except ValueError as err:
             self.refuse(str(err))
             return str(err)
@@ -160,7 +170,10 @@ class Session:
             raise parsed
         try:
             start = self.stepper.command_trajectory(parsed)
-        except ValueError as err:    # CommandRejected from the schedule: a duplicate, a late join that would jump
+        except DuplicateCommand:
+            self.commands.repeated += 1
+            raise
+        except ValueError as err:    # CommandRejected from the schedule: a late join that would jump, ...
             self.refuse(str(err))
             raise
         self.stream_open = False

@@ -24,7 +24,7 @@ from ..physics.parts import PartsModel, PartsState
 from ..physics.trajectory import CommandLimits, check_table
 from ..physics.waveforms import StrokeSchedule, trajectory_table
 from .applied import AppliedCommands
-from .commands import DUPLICATE, CommandRejected, TrajectoryCommand, start_time
+from .commands import DUPLICATE, CommandRejected, DuplicateCommand, TrajectoryCommand, start_time
 
 JOIN_TOLERANCE = (1e-9, 1e-5)    # m, m/s: a late trajectory joins the stroke in force only this close to it
 LEFT_LIMIT_S = 1e-12             # s: "just before" a window's start (knots are whole ns; stamp + offset and the
@@ -199,7 +199,7 @@ class Stepper:
         if cmd.command_id in self.applied:
             t_applied = self.applied.applied_at(cmd.command_id)
             when = 'before' if t_applied is None else f'at t = {t_applied:.9f} s'
-            raise CommandRejected(f'trajectory {cmd.command_id}: {DUPLICATE} {when}, not applied again')
+            raise DuplicateCommand(f'trajectory {cmd.command_id}: {DUPLICATE} {when}, not applied again')
         t0 = start_time(cmd.stamp, self.t)
         if not cmd.is_stop and 0.0 < cmd.stamp < t0:
             self._check_late_join(cmd, t0)

@@ -1,0 +1,140 @@
+"""A whole burst lost on its way (discovery matches the two ends one after the other, and a message sent in
+between is lost without an error) is sent again until the simulator's receipt names it; the simulator
+applies it once, and the copies are neither faults on its side nor on the sender's.
+
+The loss itself cannot be brought about on demand, so :class:`LosingSimulator` (what the actuator takes for
+a simulator: it subscribes to ``actuator/trajectory`` and publishes ``actuator/joint_states``) ignores the
+first trajectory it gets as if it never arrived, and acknowledges the others on
+``simulator/command_receipts`` as the simulator does. The actuator and the middleware are real; the
+simulator's side (a duplicate applied once, counted apart, no extra lockstep step) runs on a real Simulator.
+"""
+
+from __future__ import annotations
+
+import time
+
+import pytest
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from ros_helpers import wait_until
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Header
+from trajectory_msgs.msg import JointTrajectory
+
+from micro_feeder.interface.names import receipt_frame
+from micro_feeder.nodes._ros import topic_qos
+from micro_feeder.nodes.actuator import Actuator
+from micro_feeder.nodes.simulator import Simulator
+from micro_feeder.nodes.until_receipt import RECEIPT_WAIT_S
+
+pytestmark = pytest.mark.faults
+
+
+class LosingSimulator(Node):
+    """Loses the first ``lost`` trajectories it gets; keeps and acknowledges the others."""
+
+    def __init__(self, context: Context, lost: int) -> None:
+        super().__init__('simulator', context=context)
+        self.lost = lost
+        self.received: list[JointTrajectory] = []
+        self.create_subscription(JointTrajectory, 'actuator/trajectory', self._on_trajectory,
+                                 topic_qos('actuator/trajectory'))
+        self.create_publisher(JointState, 'actuator/joint_states', topic_qos('actuator/joint_states'))
+        self._receipts = self.create_publisher(Header, 'simulator/command_receipts',
+                                               topic_qos('simulator/command_receipts'))
+
+    def _on_trajectory(self, msg: JointTrajectory) -> None:
+        if self.lost:
+            self.lost -= 1
+            return
+        self.received.append(msg)
+        self._receipts.publish(Header(frame_id=receipt_frame('actuator/trajectory', msg.header.frame_id)))
+
+
+def _spin(executor: SingleThreadedExecutor, seconds: float) -> None:
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        executor.spin_once(timeout_sec=0.02)
+
+
+@pytest.mark.parametrize('lost', [1, 2])
+def test_a_burst_lost_in_discovery_is_sent_again_until_its_receipt(ros_context: Context, lost: int) -> None:
+    """The burst's first ``lost`` copies vanish: the actuator sends it again (same identity, same knots)
+    after 1 s, then 2 s, and stops once the receipt names it. Before, auto_start sent it once, and a burst
+    lost that way was never applied (a clean-clone CI run timed out waiting for its receipt)."""
+    actuator = Actuator(context=ros_context, overrides={'auto_start': True, 'stroke.count': 2})
+    simulator = LosingSimulator(ros_context, lost)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(actuator)
+    executor.add_node(simulator)
+    try:
+        wait_until(lambda: actuator.bursts == 1, 20.0, executor=executor, what='the auto start')
+        sent_at = time.monotonic()
+        wait_until(lambda: simulator.received, 20.0, executor=executor, what='a copy that arrives')
+        waited = time.monotonic() - sent_at
+        assert waited >= RECEIPT_WAIT_S * (2 ** lost - 1) - 0.05, waited      # 1 s, then 1 + 2 s
+        wait_until(lambda: actuator.delivery.awaited is None, 10.0, executor=executor, what='the receipt taken')
+        _spin(executor, 2.5 * RECEIPT_WAIT_S * 2 ** lost)        # past the next resend, were it still waiting
+        assert len(simulator.received) == 1 and actuator.delivery.resent == lost
+        assert actuator.bursts == 1 and actuator.refusals.refused == 0
+        burst = simulator.received[0]
+        assert burst.header.frame_id.endswith(':b1') and len(burst.points) > 10
+    finally:
+        executor.shutdown()
+        actuator.destroy_node()
+        simulator.destroy_node()
+
+
+def test_a_stop_ends_the_wait_for_a_receipt(ros_context: Context) -> None:
+    """A burst whose receipt never comes is not sent again after a stop (it would restart the strokes)."""
+    actuator = Actuator(context=ros_context, overrides={'auto_start': True, 'stroke.count': 2})
+    simulator = LosingSimulator(ros_context, lost=1)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(actuator)
+    executor.add_node(simulator)
+    try:
+        wait_until(lambda: actuator.bursts == 1, 20.0, executor=executor, what='the auto start')
+        assert actuator.stop() == 'stop sent' and actuator.delivery.awaited is None
+        _spin(executor, 2.5 * RECEIPT_WAIT_S)
+        assert actuator.delivery.resent == 0
+        wait_until(lambda: len(simulator.received) == 1, 10.0, executor=executor, what='the stop')
+        assert not simulator.received[0].points                              # the stop, not the burst
+    finally:
+        executor.shutdown()
+        actuator.destroy_node()
+        simulator.destroy_node()
+
+
+@pytest.mark.parametrize('lockstep', [False, True])
+def test_a_copy_of_an_applied_burst_is_refused_once_counted_apart_and_grants_nothing(
+        ros_context: Context, lockstep: bool) -> None:
+    """The same burst sent three times to a real Simulator: applied once; the two copies are answered as
+    duplicates on simulator/command_status but counted in commands_repeated, not rejected_commands, the
+    actuator does not count them as refusals, and in lockstep they grant no step (a command applies, and
+    grants, once)."""
+    simulator = Simulator(context=ros_context, overrides={'lockstep': lockstep, 'start_paused': True})
+    actuator = Actuator(context=ros_context, overrides={'auto_start': False, 'stroke.count': 1})
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(simulator)
+    executor.add_node(actuator)
+    try:
+        wait_until(actuator.simulator_ready, 20.0, executor=executor, what='the actuator reaches the simulator')
+        before = simulator.steps_granted
+        actuator.start()
+        burst = actuator.delivery._awaited.message
+        wait_until(lambda: actuator.delivery.awaited is None, 10.0, executor=executor, what='the receipt')
+        assert simulator.steps_granted == before + lockstep          # the burst's own grant, in lockstep
+        for _ in range(2):
+            actuator._pub.publish(burst)
+        wait_until(lambda: simulator.commands.repeated == 2, 10.0, executor=executor, what='both copies handled')
+        wait_until(lambda: actuator.refusals.repeated == 2, 10.0, executor=executor, what='both answers')
+        assert simulator.commands.refused == 0 and simulator.commands.received == 3
+        items = {kv.key: kv.value for kv in simulator.diagnostics().values}
+        assert items['commands_repeated'] == '2' and items['rejected_commands'] == '0'
+        assert actuator.refusals.refused == 0 and actuator.refusals.last == ''
+        assert simulator.steps_granted == before + lockstep          # and none for the copies
+    finally:
+        executor.shutdown()
+        actuator.destroy_node()
+        simulator.destroy_node()
