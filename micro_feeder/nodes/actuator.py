@@ -4,8 +4,10 @@
 accelerations of the analytic waveform, placed so that the quintic interpolation the simulator (and
 joint_trajectory_controller) runs through them reproduces the schedule within 5e-13 m at every instant
 (:mod:`micro_feeder.physics.trajectory`). ``~/stop`` stops: the stream ends and an empty trajectory
-holds the strokes where they are. With ``auto_start`` the burst is sent once, as soon as a subscriber
-(the simulator) is connected. ``stroke.*`` may be changed at any time and apply to the next start.
+holds the strokes where they are. With ``auto_start`` the burst is sent once a simulator is reached. A
+whole burst is sent again, the same bytes and identity, until the simulator's receipt names it
+(:mod:`.until_receipt`: discovery can lose it). ``stroke.*`` may be changed at any time and apply to the
+next start.
 
 A burst that fits in one message (``stream.max_points`` knots, at most :data:`MESSAGE_BYTES`) goes out
 whole, stamped 0 ("start on receipt"; ``stroke.delay`` is in the knot times): it needs nothing from the
@@ -59,7 +61,8 @@ class NotSent(RuntimeError):
 
 
 NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
-    'auto_start': (ParamSpec('send the burst once when a subscriber is connected', kind='bool', read_only=True),
+    'auto_start': (ParamSpec('send the burst once a simulator is reached (a whole burst again until its receipt)',
+                             kind='bool', read_only=True),
                    True),
     'knots_per_stroke': (ParamSpec('minimum trajectory knots per stroke period (0: none); the waveform gets '
                                    'more where it needs them to be followed within 5e-13 m', kind='int', ge=0,
