@@ -158,9 +158,9 @@ class Actuator(Node):
         if knots is not None:
             times, pos, vel, acc = knots
             n = pos.shape[1]
-            burst = trajectory_cdr.encode(joint_names(n), np.round(times * 1e9), pos, vel, acc, Time(),
-                                          self._command_id())
-            self.delivery.expect(self._command_id(), burst)
+            command_id = self._command_id()
+            burst = trajectory_cdr.encode(joint_names(n), np.round(times * 1e9), pos, vel, acc, Time(), command_id)
+            self.delivery.expect(command_id, burst)
             if not self.publishes.publish(self._pub, burst):
                 self.delivery.settle()
                 self.bursts -= 1                     # nothing of it went out: the next burst takes its number
