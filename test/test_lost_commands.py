@@ -11,6 +11,7 @@ simulator's side (a duplicate applied once, counted apart, no extra lockstep ste
 
 from __future__ import annotations
 
+import dataclasses
 import time
 
 import pytest
@@ -25,7 +26,9 @@ from trajectory_msgs.msg import JointTrajectory
 from micro_feeder.interface.names import receipt_frame
 from micro_feeder.nodes._ros import topic_qos
 from micro_feeder.nodes.actuator import Actuator
+from micro_feeder.nodes.feed_controller import FeedController
 from micro_feeder.nodes.simulator import Simulator
+from micro_feeder.nodes.spin import spin_nodes
 from micro_feeder.nodes.until_receipt import RECEIPT_WAIT_S
 
 pytestmark = pytest.mark.faults
@@ -138,3 +141,59 @@ def test_a_copy_of_an_applied_burst_is_refused_once_counted_apart_and_grants_not
         executor.shutdown()
         actuator.destroy_node()
         simulator.destroy_node()
+
+
+def _losing_first_trajectory(simulator: Simulator) -> list[int]:
+    """Make a real Simulator lose the first trajectory that reaches it, as if discovery had lost it on the way
+    (its engine never sees it: no receipt, no count); returns a one-item list counting the trajectories lost."""
+    lost = [0]
+    submit = simulator._engine.submit
+
+    def losing(topic: str, data: bytes) -> None:
+        if topic == 'actuator/trajectory' and not lost[0]:
+            lost[0] += 1
+            return
+        submit(topic, data)
+
+    simulator._engine.submit = losing
+    return lost
+
+
+def _feed_run(ros_context: Context, lockstep: bool, lose_first: bool) -> tuple:
+    """A FeedController feeding the part to 0.46 mm against a real Simulator; returns (the controller, the
+    simulator's state at the end, the simulator's intake counters, trajectories lost)."""
+    simulator = Simulator(context=ros_context, overrides={'lockstep': lockstep})
+    lost = _losing_first_trajectory(simulator) if lose_first else [0]
+    controller = FeedController(context=ros_context, overrides={'feed.target_x': 0.46e-3, 'lockstep': lockstep})
+    deadline = time.monotonic() + 60.0
+    try:
+        spin_nodes([simulator, controller], lambda: controller.done or time.monotonic() > deadline, ros_context)
+        assert controller.done, f'the feed run timed out at sim time {simulator.stepper.t:.6f} s, lost {lost[0]}'
+        return controller, simulator.stepper.state, dataclasses.replace(simulator.commands), lost[0]
+    finally:
+        controller.destroy_node()
+        simulator.destroy_node()
+
+
+def test_a_lockstep_feed_run_with_its_first_burst_lost_ends_as_one_without(ros_context: Context) -> None:
+    """Lockstep: the controller's first burst is also the grant of the next step, so losing it stalled the
+    run (sim time waits for a grant that never comes). Sent again until its receipt, the run reaches the
+    target in the same final state, to the last bit, as a run that lost nothing."""
+    finals = {}
+    for lose_first in (False, True):
+        controller, state, commands, lost = _feed_run(ros_context, True, lose_first)
+        assert controller.planner.status == 'reached' and lost == lose_first
+        assert controller.delivery.resent == lost and commands.refused == 0
+        finals[lose_first] = (state.t, state.x, state.xdot, controller.planner.bursts, controller.planner.strokes)
+    assert finals[True] == finals[False]
+
+
+def test_a_real_time_burst_lost_is_fired_again_not_taken_for_no_motion(ros_context: Context) -> None:
+    """Real time: the first burst is lost. With no receipt for it by the next decision, the controller fires
+    it again (same identity, new stamp) instead of learning from it that the strokes do not move the part:
+    every burst the planner learned from was applied by the simulator. Before, the planner counted the lost
+    burst, saw no motion and raised the amplitude."""
+    controller, _state, commands, lost = _feed_run(ros_context, False, True)
+    applied = commands.received - commands.repeated - commands.refused
+    assert lost == 1 and controller.planner.bursts == applied
+    assert controller.planner.status == 'reached' and controller.bursts_refired >= 1 and commands.refused == 0

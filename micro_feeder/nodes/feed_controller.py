@@ -13,6 +13,14 @@ deciding on the state at t it grants the next ``step_period`` (a trajectory it s
 otherwise it calls ``simulator/step``), and never waits for sim time it has not granted. It grants the first
 step itself as soon as ``simulator/step`` is available, and ignores the t = 0 state the simulator publishes
 when it starts (that one answers no grant), so every run takes the same steps whatever the start-up timing.
+
+A burst lost on its way (discovery matches the two ends one after the other; a message sent in between is
+lost without an error) is not taken for a burst that did not move the part: the simulator acknowledges each
+command on ``simulator/command_receipts``. In lockstep, where sim time waits for the burst, the same bytes go
+again until the receipt comes (:class:`~.until_receipt.UntilReceipt`); in real time, where a copy sent later
+would start mid-stroke, the burst is fired again, under the same identity, at the next decision on a part
+at rest. Either way the simulator applies an identity once and refuses a copy of an applied burst as a
+duplicate.
 """
 
 from __future__ import annotations
@@ -29,6 +37,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import serialize_message
 from std_msgs.msg import Header, String
 from std_srvs.srv import Trigger
 from trajectory_msgs.msg import JointTrajectory
@@ -45,6 +54,7 @@ from .goal_sender import COMMAND_INTERFACES, GoalSender
 from .parameters import declare, values
 from .refused import RefusedPublishes
 from .spin import spin_node
+from .until_receipt import UntilReceipt
 
 NODE_SPECS: dict[str, tuple[ParamSpec, Any]] = {
     'settle_time': (ParamSpec('sim time to wait after a burst ends before judging where the part rests', 's',
@@ -92,8 +102,12 @@ class FeedController(Node):
         self._pub_status = self.create_publisher(String, '~/status', STATUS_QOS)
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', topic_qos('/diagnostics'))
         self._instance = f'{self.get_fully_qualified_name()}@{time.time_ns():x}'   # names this run's bursts
-        self.refusals = RefusalWatch(self, self._instance + ':')    # the simulator's answers to them
+        self.refusals = RefusalWatch(self, self._instance + ':', self._on_refused)   # the simulator's answers
         self.publishes = RefusedPublishes(self.get_logger())   # what the middleware refused to take, counted
+        # a burst with no receipt yet: sent again while sim time waits for it (lockstep) and only then
+        self.delivery = UntilReceipt(self, lambda data: self.publishes.publish(self._pub_trajectory, data),
+                                     lambda: self._lockstep and self._pub_trajectory.get_subscription_count() > 0)
+        self.bursts_refired = 0          # real time: bursts fired again, having had no receipt by the next decision
         self.goals = (GoalSender(self, on_handled=self._grant_step)   # a goal is not a grant
                       if self.get_parameter('command_interface').value == 'action' else None)
         self.create_subscription(PoseStamped, 'particle/pose', self._on_pose, topic_qos('particle/pose'))
@@ -107,6 +121,7 @@ class FeedController(Node):
         self._poses: dict[int, PoseStamped] = {}
         self._twists: dict[int, TwistStamped] = {}
         self._burst: Burst | None = None
+        self._burst_id = ''              # the identity (header.frame_id) the burst was sent under
         self._unsent: Burst | None = None    # the burst the middleware refused: fired again at the next decision
         self._burst_from_x = 0.0
         self._quiet_after = 0.0          # sim time (s) before which the part is not judged at rest
@@ -161,6 +176,12 @@ class FeedController(Node):
         if not self._lockstep and not self._simulator_listens():
             return
         if self._burst is not None:
+            if self._unreceived():
+                self.bursts_refired += 1
+                self.get_logger().info(f'no receipt for {self._burst_id} by sim time {t:.6f} s (lost in '
+                                       'discovery): fired again')
+                self._fire(self._burst, t, x, self._burst_id)
+                return
             self.planner.observe(self._burst, self._burst_from_x, x)
             self._burst = None
         burst = self._unsent if self._unsent is not None else self.planner.next_burst(x)
@@ -169,6 +190,17 @@ class FeedController(Node):
             self._finish(t, x)
             return
         self._fire(burst, t, x)
+
+    def _unreceived(self) -> bool:
+        """Real time, on the topic: has the last burst had no receipt (nor a refusal) yet? Its receipt left the
+        simulator when the burst arrived, well before the burst's end, so none by now means the burst was
+        lost; or, rarely, that the receipt was: then the burst fired again is refused as a duplicate, moves
+        nothing, and the part is judged once its settle time has passed again."""
+        return not self._lockstep and self.goals is None and self.delivery.awaited == self._burst_id
+
+    def _on_refused(self, command_id: str, reason: str) -> None:
+        """The simulator refused a burst (or a copy of one it applied): it is not awaited any more."""
+        self.delivery.settle(command_id)
 
     def _simulator_listens(self) -> bool:
         """Real-time mode: has ``actuator/trajectory`` a subscriber yet? A burst sent before it has one is
@@ -182,10 +214,11 @@ class FeedController(Node):
                                    'follow_joint_trajectory action) before the first burst')
         return False
 
-    def _fire(self, burst: Burst, t: float, x: float) -> None:
+    def _fire(self, burst: Burst, t: float, x: float, command_id: str = '') -> None:
         """Send ``burst`` stamped to start at t + ``command_lead`` + the wall time spent building it (sim
         time, real-time mode; a 20-stroke burst takes tens of ms to sample), or at t in lockstep, where the
-        simulator waits. Judge the part again ``settle_time`` after the burst's end."""
+        simulator waits. Judge the part again ``settle_time`` after the burst's end. ``command_id``: the
+        identity of a burst fired again (its start position stays the one it was first fired from)."""
         building = time.perf_counter()
         phases = tuple(reversed(self.stroke.phases)) if burst.reversed_wave else self.stroke.phases
         stroke = dataclasses.replace(self.stroke, amplitude=burst.amplitude_m, count=burst.count, delay=0.0,
@@ -194,12 +227,19 @@ class FeedController(Node):
         msg = messages.trajectory(joint_names(n), *sample_waveform(stroke, n, self._knots), Time())
         start = t if self._lockstep else t + self._lead + (time.perf_counter() - building)
         msg.header.stamp = stamps.to_time(start)
-        msg.header.frame_id = f'{self._instance}:b{self.commands_sent + 1}'
+        msg.header.frame_id = command_id or f'{self._instance}:b{self.commands_sent + 1}'
+        if self.goals is None:
+            self.delivery.expect(msg.header.frame_id, serialize_message(msg))
         if not self.send(msg):          # refused: fired again (the same burst) when the next state comes
+            if command_id:              # still awaited: the next decision fires it again
+                return
+            self.delivery.settle()
             self._unsent = burst
             self._grant_step()          # lockstep: the command was to be the grant
             return
-        self._burst, self._burst_from_x = burst, x
+        if not command_id:
+            self._burst_from_x = x
+        self._burst, self._burst_id = burst, msg.header.frame_id
         self._quiet_after = start + stroke.burst_end_s() + self._settle
 
     def send(self, msg: JointTrajectory) -> bool:
@@ -275,6 +315,7 @@ class FeedController(Node):
                                   values=[KeyValue(key=k, value=str(v)) for k, v in
                                           {**self.result(), 'commands_refused': refused,
                                            'last_refusal': last,
+                                           'bursts_resent': self.delivery.resent + self.bursts_refired,
                                            'publishes_refused': self.publishes.total()}.items()])
         self.publishes.publish(self._pub_diag, DiagnosticArray(header=Header(stamp=stamps.to_time(self.last_t)),
                                                                status=[status]))

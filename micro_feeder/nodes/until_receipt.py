@@ -15,6 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
+from rclpy.clock import Clock, ClockType
 from std_msgs.msg import Header
 
 from ..interface.names import split_receipt_frame
@@ -47,7 +48,8 @@ class UntilReceipt:
         self.resent = 0             # copies sent, since start
         node.create_subscription(Header, 'simulator/command_receipts', self._on_receipt,
                                  topic_qos('simulator/command_receipts'))
-        node.create_timer(CHECK_PERIOD_S, self._check)
+        # wall time: under use_sim_time a sim-time timer would wait for the very sim time a lost command holds
+        node.create_timer(CHECK_PERIOD_S, self._check, clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     @property
     def awaited(self) -> str | None:
