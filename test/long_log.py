@@ -25,6 +25,7 @@ from pathlib import Path
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from node_helpers import proc_status
 from rcl_interfaces.msg import ParameterEvent
 from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
@@ -171,13 +172,8 @@ WRAPPER = ('import atexit, sys\n'
 
 def status_kb(pid: int, key: str) -> int | None:
     """``key`` (VmRSS, VmHWM ...) of a process from /proc, in kB; None when it is gone."""
-    try:
-        for line in Path(f'/proc/{pid}/status').read_text().splitlines():
-            if line.startswith(key + ':'):
-                return int(line.split()[1])
-    except (OSError, ValueError):
-        return None
-    return None
+    value = proc_status(pid, key)
+    return None if value is None else int(value)
 
 
 def is_progress(line: str) -> bool:

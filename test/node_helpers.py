@@ -85,6 +85,18 @@ def start_process(name: str, *ros_args: str) -> subprocess.Popen:
                             text=True)
 
 
+def proc_status(pid: int, key: str) -> str | None:
+    """The first field of ``key`` (VmRSS, VmHWM in kB; SigCgt in hex ...) in /proc/PID/status, as written
+    there; None when the process has gone."""
+    try:
+        for line in Path(f'/proc/{pid}/status').read_text().splitlines():
+            if line.startswith(key + ':'):
+                return line.split()[1]
+    except OSError:
+        return None
+    return None
+
+
 def stop_process(proc: subprocess.Popen) -> tuple[int, str]:
     """SIGINT and wait (SIGKILL after 20 s, after SIGUSR1 for its threads' stacks): (exit status, -9 when
     killed; output). Stopping it again gives the same answer (its output is read once)."""

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from node_helpers import start_process, stop_process
+from node_helpers import proc_status, start_process, stop_process
 from rcl_interfaces.srv import SetParametersAtomically
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -83,11 +83,7 @@ def test_sigusr1_prints_every_threads_stack_and_the_node_runs_on(ros_context: Co
 
 def _caught_signals(pid: int) -> int:
     """The mask of signals process ``pid`` has handlers for (``SigCgt`` in /proc), 0 once it has gone."""
-    try:
-        status = Path(f'/proc/{pid}/status').read_text()
-    except OSError:
-        return 0
-    return next(int(line.split()[1], 16) for line in status.splitlines() if line.startswith('SigCgt:'))
+    return int(proc_status(pid, 'SigCgt') or '0', 16)
 
 
 @pytest.mark.parametrize('name', NODES)
