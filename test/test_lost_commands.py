@@ -14,19 +14,24 @@ from __future__ import annotations
 import dataclasses
 import time
 
+import numpy as np
 import pytest
+from builtin_interfaces.msg import Time
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
+from rclpy.serialization import serialize_message
 from ros_helpers import wait_until
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from trajectory_msgs.msg import JointTrajectory
 
-from micro_feeder.interface.names import receipt_frame
+from micro_feeder.interface import messages
+from micro_feeder.interface.names import joint_names, receipt_frame
 from micro_feeder.nodes._ros import topic_qos
 from micro_feeder.nodes.actuator import Actuator
 from micro_feeder.nodes.feed_controller import FeedController
+from micro_feeder.nodes.goal_sender import GoalSender
 from micro_feeder.nodes.simulator import Simulator
 from micro_feeder.nodes.spin import spin_nodes
 from micro_feeder.nodes.until_receipt import RECEIPT_WAIT_S
@@ -159,12 +164,33 @@ def _losing_first_trajectory(simulator: Simulator) -> list[int]:
     return lost
 
 
-def _feed_run(ros_context: Context, lockstep: bool, lose_first: bool) -> tuple:
-    """A FeedController feeding the part to 0.46 mm against a real Simulator; returns (the controller, the
-    simulator's state at the end, the simulator's intake counters, trajectories lost)."""
+def _losing_first_goal(simulator: Simulator) -> list[int]:
+    """Make a real Simulator's follow_joint_trajectory server lose the first goal request that reaches it, as
+    if discovery had lost it on the way (no answer, no receipt, no count); returns a one-item list counting the
+    requests lost. rclpy's ActionServer takes each request through ``_execute_goal_request``."""
+    lost = [0]
+    server = simulator._trajectory_action._server
+    execute_request = server._execute_goal_request
+
+    async def losing(request: object) -> None:
+        if not lost[0]:
+            lost[0] += 1
+            return
+        await execute_request(request)
+
+    server._execute_goal_request = losing
+    return lost
+
+
+def _feed_run(ros_context: Context, lockstep: bool, lose_first: bool, interface: str = 'topic') -> tuple:
+    """A FeedController feeding the part to 0.46 mm against a real Simulator, its bursts sent on ``interface``
+    (topic, action); returns (the controller, the simulator's state at the end, the simulator's intake
+    counters, bursts lost)."""
     simulator = Simulator(context=ros_context, overrides={'lockstep': lockstep})
-    lost = _losing_first_trajectory(simulator) if lose_first else [0]
-    controller = FeedController(context=ros_context, overrides={'feed.target_x': 0.46e-3, 'lockstep': lockstep})
+    losing = _losing_first_goal if interface == 'action' else _losing_first_trajectory
+    lost = losing(simulator) if lose_first else [0]
+    controller = FeedController(context=ros_context, overrides={'feed.target_x': 0.46e-3, 'lockstep': lockstep,
+                                                                'command_interface': interface})
     deadline = time.monotonic() + 60.0
     try:
         spin_nodes([simulator, controller], lambda: controller.done or time.monotonic() > deadline, ros_context)
@@ -175,25 +201,94 @@ def _feed_run(ros_context: Context, lockstep: bool, lose_first: bool) -> tuple:
         simulator.destroy_node()
 
 
-def test_a_lockstep_feed_run_with_its_first_burst_lost_ends_as_one_without(ros_context: Context) -> None:
-    """Lockstep: the controller's first burst is also the grant of the next step, so losing it stalled the
-    run (sim time waits for a grant that never comes). Sent again until its receipt, the run reaches the
+@pytest.mark.parametrize('interface', ['topic', 'action'])
+def test_a_lockstep_feed_run_with_its_first_burst_lost_ends_as_one_without(ros_context: Context,
+                                                                           interface: str) -> None:
+    """Lockstep: sim time waits for the controller's first burst (on the topic it is the grant of the next
+    step; with the action the grant follows the goal's first answer), so losing it stalled the run. Sent
+    again until its receipt (with the action, as a new goal under the same identity), the run reaches the
     target in the same final state, to the last bit, as a run that lost nothing."""
     finals = {}
     for lose_first in (False, True):
-        controller, state, commands, lost = _feed_run(ros_context, True, lose_first)
+        controller, state, commands, lost = _feed_run(ros_context, True, lose_first, interface)
         assert controller.planner.status == 'reached' and lost == lose_first
         assert controller.delivery.resent == lost and commands.refused == 0
+        if interface == 'action':
+            goals = controller.goals
+            assert goals.sent == controller.commands_sent + lost and goals.refused == goals.repeated == 0
         finals[lose_first] = (state.t, state.x, state.xdot, controller.planner.bursts, controller.planner.strokes)
     assert finals[True] == finals[False]
 
 
-def test_a_real_time_burst_lost_is_fired_again_not_taken_for_no_motion(ros_context: Context) -> None:
+@pytest.mark.parametrize('interface', ['topic', 'action'])
+def test_a_real_time_burst_lost_is_fired_again_not_taken_for_no_motion(ros_context: Context,
+                                                                       interface: str) -> None:
     """Real time: the first burst is lost. With no receipt for it by the next decision, the controller fires
     it again (same identity, new stamp) instead of learning from it that the strokes do not move the part:
     every burst the planner learned from was applied by the simulator. Before, the planner counted the lost
     burst, saw no motion and raised the amplitude."""
-    controller, _state, commands, lost = _feed_run(ros_context, False, True)
+    controller, _state, commands, lost = _feed_run(ros_context, False, True, interface)
     applied = commands.received - commands.repeated - commands.refused
     assert lost == 1 and controller.planner.bursts == applied
     assert controller.planner.status == 'reached' and controller.bursts_refired >= 1 and commands.refused == 0
+    if interface == 'action':
+        assert controller.goals.refused == 0 and controller.goals.repeated == commands.repeated
+
+
+def test_an_actuator_goal_lost_is_sent_again_and_applied_once(ros_context: Context) -> None:
+    """With the action, the actuator's goal request is lost (no answer at all): the burst goes again as a new
+    goal under the same identity after 1 s, the simulator applies it once, and the goal runs to success.
+    Before, the burst was sent once, and a lost goal was never applied."""
+    simulator = Simulator(context=ros_context, overrides={'lockstep': False})
+    lost = _losing_first_goal(simulator)
+    actuator = Actuator(context=ros_context, overrides={'auto_start': True, 'stroke.count': 2,
+                                                        'command_interface': 'action'})
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(simulator)
+    executor.add_node(actuator)
+    goals = actuator.goals
+    try:
+        wait_until(lambda: actuator.bursts == 1, 20.0, executor=executor, what='the auto start')
+        wait_until(lambda: goals.succeeded == 1, 20.0, executor=executor, what='the goal sent again succeeding')
+        _spin(executor, 2.5 * RECEIPT_WAIT_S)                    # past the next resend, were it still waiting
+        assert lost[0] == 1 and actuator.delivery.resent == 1 and actuator.delivery.awaited is None
+        assert goals.sent == 2 and goals.refused == goals.repeated == 0 and goals.state == 'succeeded'
+        commands = simulator.commands
+        assert commands.received == 1 and commands.refused == commands.repeated == 0 and actuator.bursts == 1
+    finally:
+        executor.shutdown()
+        actuator.destroy_node()
+        simulator.destroy_node()
+
+
+def test_a_copy_of_an_applied_goal_is_a_duplicate_not_a_refusal_nor_a_second_grant(ros_context: Context) -> None:
+    """A goal sent again when only its answers were lost: the simulator aborts the copy as a duplicate; the
+    sender counts it in ``repeated`` (not ``refused``), keeps the first copy as the running goal and does not
+    run ``on_handled`` (a lockstep controller's grant) a second time for the same burst."""
+    simulator = Simulator(context=ros_context, overrides={'start_paused': True})   # the goal stays running
+    client = Node('goal_client', context=ros_context)
+    handled: list[str] = []
+    goals = GoalSender(client, on_handled=lambda: handled.append('grant'))
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(simulator)
+    executor.add_node(client)
+    try:
+        wait_until(goals.ready, 20.0, executor=executor, what='the action server')
+        n = simulator.stepper.model.n_actuators
+        knots = np.linspace(0.0, 1e-3, 5)
+        burst = messages.trajectory(joint_names(n), knots, np.zeros((5, n)), np.zeros((5, n)), np.zeros((5, n)),
+                                    Time())
+        burst.header.frame_id = '/goal_client@1:b1'
+        goals.send(burst)
+        wait_until(lambda: goals.state == 'running' and goals.running is not None, 10.0, executor=executor,
+                   what='the goal running, its acceptance in')    # the first feedback can come before it
+        first = goals.running
+        goals.send_copy(serialize_message(burst))
+        wait_until(lambda: goals.repeated == 1, 10.0, executor=executor, what='the copy answered')
+        assert simulator.commands.repeated == 1 and simulator.commands.refused == 0
+        assert goals.refused == 0 and goals.last == '' and goals.sent == 2
+        assert goals.running is first and goals.state == 'running' and handled == ['grant']
+    finally:
+        executor.shutdown()
+        client.destroy_node()
+        simulator.destroy_node()

@@ -34,6 +34,7 @@ from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Header
 from std_srvs.srv import Trigger
@@ -112,10 +113,12 @@ class Actuator(Node):
         self._instance = f'{self.get_fully_qualified_name()}@{time.time_ns():x}'   # names this run's commands
         self.refusals = RefusalWatch(self, self._instance + ':', self._on_refused)   # the simulator's answers
         self.publishes = RefusedPublishes(self.get_logger())   # what the middleware refused to take, counted
-        # a whole burst is sent again until the simulator's receipt names it (lost in discovery otherwise)
-        self.delivery = UntilReceipt(self, lambda data: self.publishes.publish(self._pub, data),
-                                     lambda: bool(self._simulator_subscriptions()))
         self.goals = GoalSender(self) if self.get_parameter('command_interface').value == 'action' else None
+        # a whole burst is sent again until the simulator's receipt names it (lost in discovery otherwise)
+        send_copy = (self.goals.send_copy if self.goals is not None
+                     else lambda data: self.publishes.publish(self._pub, data))
+        self.delivery = UntilReceipt(self, send_copy, lambda: self.goals.ready() if self.goals is not None
+                                     else bool(self._simulator_subscriptions()))
         self._graph_seen: frozenset[bytes] | None = None   # the trajectory subscriptions seen ready, and since when
         self._graph_since = 0.0
         self._simulators: frozenset[bytes] = frozenset()   # trajectory subscriptions of the simulators reached
@@ -192,6 +195,7 @@ class Actuator(Node):
         n = pos.shape[1]
         goal = messages.trajectory(joint_names(n), times, pos, vel, acc, Time())
         goal.header.frame_id = self._command_id()
+        self.delivery.expect(goal.header.frame_id, serialize_message(goal))
         self.goals.send(goal)
         return f'burst sent as a FollowJointTrajectory goal: {times.size} knots on {n} joints, {times[-1]:.6g} s'
 
@@ -261,6 +265,7 @@ class Actuator(Node):
         action, cancel the running goal (the simulator holds the strokes where they are). Raises
         :class:`NotSent` when the middleware refused the stop (stop again)."""
         if self.goals is not None:
+            self.delivery.settle()
             if not self.goals.cancel():
                 return f'no goal running: nothing to stop (the last one {self.goals.state})'
             self.stops += 1

@@ -15,9 +15,11 @@ step itself as soon as ``simulator/step`` is available, and ignores the t = 0 st
 when it starts (that one answers no grant), so every run takes the same steps whatever the start-up timing.
 
 A burst lost on its way (discovery matches the two ends one after the other; a message sent in between is
-lost without an error) is not taken for a burst that did not move the part: the simulator acknowledges each
-command on ``simulator/command_receipts``. In lockstep, where sim time waits for the burst, the same bytes go
-again until the receipt comes (:class:`~.until_receipt.UntilReceipt`); in real time, where a copy sent later
+lost without an error; with the action, a goal request can be lost the same way) is not taken for a burst
+that did not move the part: the simulator acknowledges each command, goals included, on
+``simulator/command_receipts``. In lockstep, where sim time waits for the burst, the same bytes go
+again (with the action, as a new goal under the same identity) until the receipt comes
+(:class:`~.until_receipt.UntilReceipt`); in real time, where a copy sent later
 would start mid-stroke, the burst is fired again, under the same identity, at the next decision on a part
 at rest. Either way the simulator applies an identity once and refuses a copy of an applied burst as a
 duplicate.
@@ -104,12 +106,13 @@ class FeedController(Node):
         self._instance = f'{self.get_fully_qualified_name()}@{time.time_ns():x}'   # names this run's bursts
         self.refusals = RefusalWatch(self, self._instance + ':', self._on_refused)   # the simulator's answers
         self.publishes = RefusedPublishes(self.get_logger())   # what the middleware refused to take, counted
-        # a burst with no receipt yet: sent again while sim time waits for it (lockstep) and only then
-        self.delivery = UntilReceipt(self, lambda data: self.publishes.publish(self._pub_trajectory, data),
-                                     lambda: self._lockstep and self._pub_trajectory.get_subscription_count() > 0)
-        self.bursts_refired = 0          # real time: bursts fired again, having had no receipt by the next decision
         self.goals = (GoalSender(self, on_handled=self._grant_step)   # a goal is not a grant
                       if self.get_parameter('command_interface').value == 'action' else None)
+        # a burst with no receipt yet: sent again while sim time waits for it (lockstep) and only then
+        send_copy = (self.goals.send_copy if self.goals is not None
+                     else lambda data: self.publishes.publish(self._pub_trajectory, data))
+        self.delivery = UntilReceipt(self, send_copy, lambda: self._lockstep and self._simulator_matched())
+        self.bursts_refired = 0          # real time: bursts fired again, having had no receipt by the next decision
         self.create_subscription(PoseStamped, 'particle/pose', self._on_pose, topic_qos('particle/pose'))
         self.create_subscription(TwistStamped, 'particle/twist', self._on_twist, topic_qos('particle/twist'))
         self._step_client = self.create_client(Trigger, 'simulator/step') if self._lockstep else None
@@ -192,11 +195,11 @@ class FeedController(Node):
         self._fire(burst, t, x)
 
     def _unreceived(self) -> bool:
-        """Real time, on the topic: has the last burst had no receipt (nor a refusal) yet? Its receipt left the
+        """Real time: has the last burst had no receipt (nor a refusal) yet? Its receipt left the
         simulator when the burst arrived, well before the burst's end, so none by now means the burst was
         lost; or, rarely, that the receipt was: then the burst fired again is refused as a duplicate, moves
         nothing, and the part is judged once its settle time has passed again."""
-        return not self._lockstep and self.goals is None and self.delivery.awaited == self._burst_id
+        return not self._lockstep and self.delivery.awaited == self._burst_id
 
     def _on_refused(self, command_id: str, reason: str) -> None:
         """The simulator refused a burst (or a copy of one it applied): it is not awaited any more."""
@@ -206,13 +209,20 @@ class FeedController(Node):
         """Real-time mode: has ``actuator/trajectory`` a subscriber yet? A burst sent before it has one is
         lost (or, on a half-made match, delivered late and joined mid-stroke); the state keeps coming, so
         the controller decides again on the next one. Said once in the log while waiting."""
-        if (self.goals.ready() if self.goals is not None else self._pub_trajectory.get_subscription_count() > 0):
+        if self._simulator_matched():
             return True
         if not self._told_waiting:
             self._told_waiting = True
             self.get_logger().info('waiting for the simulator (a subscriber on actuator/trajectory, or its '
                                    'follow_joint_trajectory action) before the first burst')
         return False
+
+    def _simulator_matched(self) -> bool:
+        """Is the simulator's end of the command interface matched: a subscriber on ``actuator/trajectory``,
+        or its ``follow_joint_trajectory`` action server with the action?"""
+        if self.goals is not None:
+            return self.goals.ready()
+        return self._pub_trajectory.get_subscription_count() > 0
 
     def _fire(self, burst: Burst, t: float, x: float, command_id: str = '') -> None:
         """Send ``burst`` stamped to start at t + ``command_lead`` + the wall time spent building it (sim
@@ -228,8 +238,7 @@ class FeedController(Node):
         start = t if self._lockstep else t + self._lead + (time.perf_counter() - building)
         msg.header.stamp = stamps.to_time(start)
         msg.header.frame_id = command_id or f'{self._instance}:b{self.commands_sent + 1}'
-        if self.goals is None:
-            self.delivery.expect(msg.header.frame_id, serialize_message(msg))
+        self.delivery.expect(msg.header.frame_id, serialize_message(msg))
         if not self.send(msg):          # refused: fired again (the same burst) when the next state comes
             if command_id:              # still awaited: the next decision fires it again
                 return
